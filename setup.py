@@ -1,0 +1,29 @@
+"""ament_python package uav_tilt (DESIGN section 1)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'uav_tilt'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(include=['uav_tilt_*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
+        ('share/' + PACKAGE + '/config/scenarios', glob('config/scenarios/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='uav_tilt maintainers',
+    description='Tilting-rotor H quadrotor for aerial contact inspection (ROS 2, PyBullet).',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'plant_node = uav_tilt_sim.plant_node:main',
+            'uav-tilt = uav_tilt_tools.cli:main',
+        ],
+    },
+)

@@ -1,0 +1,9 @@
+"""Test isolation: every test run gets its own ROS domain and local-only discovery."""
+import os
+import sys
+
+# Fast DDS domain ids 0-232; the pid spreads concurrent runs on one machine apart.
+os.environ['ROS_DOMAIN_ID'] = str(os.environ.get('UAV_TILT_TEST_DOMAIN', 10 + os.getpid() % 200))
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.setdefault('PYTHONUNBUFFERED', '1')
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

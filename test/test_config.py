@@ -1,0 +1,45 @@
+"""Validated configuration: one clear line naming the parameter, its value and the range."""
+import dataclasses
+
+import pytest
+
+from uav_tilt_common.config import ConfigError, from_dict, nested, param, to_flat
+
+
+@dataclasses.dataclass
+class Inner:
+    gain: float = param(1.0, lo=0.0, hi=10.0)
+    xyz: list = param([0.0, 0.0, 0.0], lo=-1.0, hi=1.0, length=3)
+
+
+@dataclasses.dataclass
+class Outer:
+    mode: str = param('lockstep', choices=('lockstep', 'realtime'))
+    count: int = param(3, lo=1, hi=5)
+    flag: bool = param(False)
+    inner: Inner = nested(Inner)
+
+
+def test_defaults_and_nested_dotted_keys():
+    cfg = from_dict(Outer, {'inner.gain': 2, 'count': 4.0})
+    assert cfg.inner.gain == 2.0 and isinstance(cfg.inner.gain, float)
+    assert cfg.count == 4 and isinstance(cfg.count, int)
+    assert to_flat(cfg)['inner.xyz'] == [0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize('data, words', [
+    ({'inner': {'gain': 11.0}}, ["'inner.gain'", '11.0', '[0.0, 10.0]']),
+    ({'mode': 'fast'}, ["'mode'", "'fast'", "'lockstep'"]),
+    ({'count': 2.5}, ["'count'", 'integer']),
+    ({'flag': 'yes'}, ["'flag'"]),
+    ({'inner.xyz': [0.0, 0.0]}, ["'inner.xyz'", '3 elements']),
+    ({'inner.gain': float('nan')}, ["'inner.gain'", 'finite']),
+    ({'bogus': 1}, ["unknown parameter 'bogus'"]),
+])
+def test_bad_values_raise_one_clear_line(data, words):
+    with pytest.raises(ConfigError) as err:
+        from_dict(Outer, data)
+    message = str(err.value)
+    assert '\n' not in message
+    for word in words:
+        assert word in message

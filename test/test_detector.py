@@ -1,0 +1,102 @@
+"""Tests of the YOLOv3-tiny family detector, save/load, predict mapping and the profiler."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from uav_tilt_vision.detector import REF_CHANNELS, Detector, load_model, save_model
+from uav_tilt_vision.profile import profile_model
+
+torch.set_num_threads(2)
+
+INPUT = (1, 3, 256, 320)
+
+
+def test_head_shapes_for_camera_input():
+    model = Detector(num_classes=3, width_mult=0.25)
+    heads = model(torch.zeros(2, 3, 256, 320))
+    # 3 anchors * (5 + 3 classes) = 24 channels; grids 320/32 x 256/32 and 320/16 x 256/16
+    assert [tuple(h.shape) for h in heads] == [(2, 24, 8, 10), (2, 24, 16, 20)]
+
+
+def test_reference_yolov3_tiny_architecture():
+    model = Detector(num_classes=80, width_mult=1.0)
+    assert model.channels() == list(REF_CHANNELS)
+    n = sum(p.numel() for p in model.parameters())
+    assert abs(n - 8.7e6) / 8.7e6 < 0.02
+
+
+def test_deployed_width_cuts_macs_at_least_4x():
+    ref = profile_model(Detector(3, 1.0), INPUT)
+    small = profile_model(Detector(3, 0.25), INPUT)
+    assert small['macs'] * 4 <= ref['macs']
+
+
+def test_wrong_channel_list_is_rejected():
+    with pytest.raises(ValueError):
+        Detector(3, channels=[8] * 10)
+
+
+def test_save_load_round_trip_with_irregular_channels(tmp_path):
+    torch.manual_seed(0)
+    channels = [5, 11, 13, 29, 37, 45, 70, 21, 33, 9, 27]
+    anchors = [[[40, 30], [60, 70], [100, 90]], [[8, 9], [15, 20], [25, 27]]]
+    model = Detector(num_classes=2, channels=channels, anchors=anchors, img_size=(320, 256))
+    model.train()
+    model(torch.rand(4, 3, 256, 320))  # move BN running statistics away from their defaults
+    model.eval()
+    path = tmp_path / 'pruned.pt'
+    save_model(path, model, {'note': 'pruned'})
+    loaded = load_model(path)
+    assert loaded.channels() == channels and loaded.meta == {'note': 'pruned'}
+    x = torch.rand(2, 3, 256, 320)
+    with torch.no_grad():
+        for a, b in zip(model(x), loaded(x)):
+            assert torch.equal(a, b)
+
+
+def test_predict_maps_a_known_detection_to_original_pixels():
+    anchors = [[[40, 30], [60, 70], [100, 90]], [[10, 12], [15, 20], [25, 27]]]
+    model = Detector(num_classes=1, width_mult=0.25, anchors=anchors)
+    k = 6  # 5 + 1 class
+    head0 = torch.full((1, 3 * k, 8, 10), -10.0)
+    head1 = torch.full((1, 3 * k, 16, 20), -10.0)
+    # anchor 0 of the stride-16 head, row 5, col 7: zero box logits give centre
+    # (cell + 0.5) * 16 = (120, 88) and size = anchor (10, 12) in the 320x256 input
+    head1[0, 0:4, 5, 7] = 0.0
+    head1[0, 4:6, 5, 7] = 10.0
+    model.forward = lambda x: [head0.expand(len(x), -1, -1, -1),
+                               head1.expand(len(x), -1, -1, -1)]
+    img = np.zeros((480, 640, 3), np.uint8)  # letterbox: scale 0.5, 8 px band top
+    dets = model.predict([img, img], conf_thres=0.5, iou_thres=0.5)
+    assert len(dets) == 2
+    score = (1 / (1 + math.exp(-10))) ** 2  # objectness * class probability
+    for d in dets:
+        assert d.shape == (1, 6)
+        # centre (120 / 0.5, (88 - 8) / 0.5) = (240, 160), size (20, 24)
+        np.testing.assert_allclose(d[0], [230, 148, 250, 172, score, 0], rtol=1e-5, atol=1e-3)
+    assert len(model.predict(img, conf_thres=0.5)) == 1
+
+
+def test_profile_hand_counted_model():
+    model = nn.Sequential(nn.Conv2d(3, 4, 3, padding=1, bias=False), nn.BatchNorm2d(4),
+                          nn.ReLU(), nn.Conv2d(4, 2, 1))
+    prof = profile_model(model, (2, 3, 8, 8))
+    bt = prof['by_type']
+    # params: 4*3*9 = 108; BN 2*4 = 8; 1x1 2*4 + 2 = 10
+    assert [bt[t]['params'] for t in ('conv3x3', 'bn', 'conv1x1', 'other')] == [108, 8, 10, 0]
+    # per-image MACs: 64 px * 4 out * 27; 64 * 4; 64 * 2 * 4
+    assert [bt[t]['macs'] for t in ('conv3x3', 'bn', 'conv1x1', 'other')] == [6912, 256, 512, 0]
+    assert prof['params'] == 126 and prof['macs'] == 7680
+    assert bt['conv3x3']['macs_share'] == pytest.approx(6912 / 7680)
+
+
+def test_profile_totals_cover_the_whole_detector():
+    model = Detector(3, 0.5)
+    prof = profile_model(model, INPUT)
+    assert prof['params'] == sum(p.numel() for p in model.parameters())
+    assert sum(v['params_share'] for v in prof['by_type'].values()) == pytest.approx(1.0)
+    assert sum(v['macs_share'] for v in prof['by_type'].values()) == pytest.approx(1.0)

@@ -1,0 +1,93 @@
+"""Tests of the COCO-style mAP against hand-computed cases (and pycocotools when present)."""
+
+import numpy as np
+import pytest
+
+from uav_tilt_vision.metrics import coco_map, mean_ap
+
+GT = np.array([[0, 0, 10, 10, 0.0]])
+
+
+def det(box, score, cls=0):
+    return [*box, score, cls]
+
+
+def test_perfect_detection_scores_one():
+    assert coco_map([np.array([det([0, 0, 10, 10], 0.9)])], [GT]) == \
+        {'map50': 1.0, 'map50_95': 1.0}
+
+
+def test_iou_062_matches_three_of_ten_thresholds():
+    # IoU = 62 / 100: matched at 0.50, 0.55, 0.60 only
+    res = coco_map([np.array([det([0, 0, 10, 6.2], 0.9)])], [GT])
+    assert res['map50'] == pytest.approx(1.0)
+    assert res['map50_95'] == pytest.approx(0.3)
+
+
+def test_false_positive_ranked_first_gives_two_thirds():
+    gts = [np.array([[0, 0, 10, 10, 0], [20, 20, 30, 30, 0.0]])]
+    preds = [np.array([det([50, 50, 60, 60], 0.9), det([0, 0, 10, 10], 0.8),
+                       det([20, 20, 30, 30], 0.7)])]
+    # precision (0, 1/2, 2/3) at recall (0, 1/2, 1): envelope is 2/3 everywhere
+    res = coco_map(preds, gts)
+    assert res['map50'] == pytest.approx(2 / 3) and res['map50_95'] == pytest.approx(2 / 3)
+
+
+def test_half_recall_samples_51_of_101_points():
+    gts = [np.array([[0, 0, 10, 10, 0], [20, 20, 30, 30, 0.0]])]
+    res = coco_map([np.array([det([0, 0, 10, 10], 0.8)])], gts)
+    assert res['map50'] == pytest.approx(51 / 101)
+
+
+def test_lower_scored_duplicate_does_not_lower_ap():
+    preds = [np.array([det([0, 0, 10, 10], 0.9), det([0, 0, 10, 10], 0.8)])]
+    assert coco_map(preds, [GT])['map50'] == pytest.approx(1.0)
+
+
+def test_classes_without_gt_ignored_and_missed_classes_zero():
+    gts = [np.array([[0, 0, 10, 10, 0], [20, 20, 30, 30, 1.0]])]
+    preds = [np.array([det([0, 0, 10, 10], 0.9, 0), det([40, 40, 50, 50], 0.9, 2)])]
+    # class 0 AP 1, class 1 AP 0 (no detection), class 2 has no gt and is not averaged
+    assert coco_map(preds, gts)['map50'] == pytest.approx(0.5)
+
+
+def test_only_100_detections_per_image_count():
+    fps = [det([100 + i, 100, 105 + i, 105], 0.9) for i in range(100)]
+    preds = [np.array(fps + [det([0, 0, 10, 10], 0.5)])]
+    assert coco_map(preds, [GT])['map50'] == 0.0
+    assert coco_map([np.array(fps[:99] + [det([0, 0, 10, 10], 0.5)])], [GT])['map50'] > 0
+
+
+def test_greedy_matching_across_images():
+    gts = [GT, GT]
+    preds = [np.array([det([0, 0, 10, 10], 0.6)]), np.array([det([0, 0, 10, 10], 0.9)])]
+    assert coco_map(preds, gts)['map50_95'] == pytest.approx(1.0)
+    assert coco_map([np.zeros((0, 6)), np.zeros((0, 6))], gts)['map50'] == 0.0
+
+
+def random_set(seed, n_img=12):
+    rng = np.random.default_rng(seed)
+    preds, gts = [], []
+    for _ in range(n_img):
+        g = rng.uniform(0, 200, (rng.integers(0, 6), 2))
+        g = np.concatenate([g, g + rng.uniform(8, 60, g.shape), rng.integers(0, 3, (len(g), 1))],
+                           1)
+        jitter = rng.normal(0, 4, (len(g), 4)).clip(-3.9, 3.9)  # sizes >= 8 stay positive
+        p = np.concatenate([g[:, :4] + jitter, rng.uniform(0.2, 1, (len(g), 1)), g[:, 4:]], 1)
+        extra = rng.uniform(0, 200, (rng.integers(0, 4), 2))
+        extra = np.concatenate([extra, extra + 20, rng.uniform(0, 1, (len(extra), 1)),
+                                rng.integers(0, 3, (len(extra), 1))], 1)
+        preds.append(np.concatenate([p, extra]))
+        gts.append(g)
+    return preds, gts
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_agrees_with_pycocotools(seed):
+    pytest.importorskip('pycocotools')
+    preds, gts = random_set(seed)
+    ours = coco_map(preds, gts)
+    ref = mean_ap(preds, gts)
+    assert ref['backend'] == 'pycocotools'
+    assert ours['map50'] == pytest.approx(ref['map50'], abs=1e-9)
+    assert ours['map50_95'] == pytest.approx(ref['map50_95'], abs=1e-9)

@@ -1,0 +1,335 @@
+"""Tests for uav_tilt_control.mission, driven by a synthetic perfect tracker.
+
+The "vehicle" is wherever the previous setpoint put it, except that the wall stops the tool
+tip and the ground stops the body; while pushed against the wall with contact gains it
+measures the impedance spring force K_z * (tool_tip_x - lambda_d_z).
+"""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.config import ConfigError
+from uav_tilt_common.state import VehicleState
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control.mission import MinJerk, Mission, MissionConfig, Mode
+from uav_tilt_control.target_estimator import TargetEstimate
+
+DT_S = 0.01
+P_POI = np.array([3.0, 0.5, 1.5])
+NORMAL = np.array([-1.0, 0.0, 0.0])
+GEAR_Z_M = 0.1          # body origin height when standing on the ground
+VEHICLE = VehicleParams()
+PERFECT = TargetEstimate(P_POI, NORMAL, 0.02, True)
+
+
+class Flight:
+    """Mission + perfect tracker + wall + ground, stepped at DT_S."""
+
+    def __init__(self, config=None, target=PERFECT):
+        self.config = config or MissionConfig()
+        self.target = target
+        self.mission = Mission(VEHICLE, self.config)
+        self.t_s = 0.0
+        self.p = np.array([0.0, 0.0, GEAR_Z_M])
+        self.v = np.zeros(3)
+        self.q = np.array([0.0, 0.0, 0.0, 1.0])
+        self.force_n = 0.0
+        self.modes = [Mode.IDLE]
+        self.log = []
+        self.step()
+
+    def state(self):
+        return VehicleState(self.t_s, self.p.copy(), self.q.copy(), self.v.copy(), np.zeros(3))
+
+    def step(self, target='default', force_n=None, odom_age_s=0.0):
+        """One tick; ``force_n`` overrides the simulated F/T reading."""
+        target = self.target if target == 'default' else target
+        f = self.force_n if force_n is None else force_n
+        sp = self.mission.update(self.t_s, self.state(), target, f, odom_age_s)
+        self.log.append((self.t_s, self.mission.mode, sp, self.p.copy()))
+        if self.mission.mode != self.modes[-1]:
+            self.modes.append(self.mission.mode)
+        self._track(sp)
+        self.t_s += DT_S
+        return sp
+
+    def _track(self, sp):
+        p = sp.origin_map + sp.R_map_t @ sp.lambda_d_t
+        v = sp.R_map_t @ sp.dlambda_d_t
+        self.force_n = 0.0
+        p_poi, normal = self.target.p_poi_map, self.target.normal_map
+        gap = (p - p_poi) @ normal - VEHICLE.tool_tip_x_m
+        if gap < 0.0 and np.linalg.norm(p - p_poi) < 1.0:
+            p = p - gap * normal
+            v = v - (v @ normal) * normal
+            if sp.contact_gains:
+                self.force_n = -gap * self.config.k_contact_z_n_per_m
+        if p[2] < GEAR_Z_M:
+            p[2], v = GEAR_Z_M, np.zeros(3)
+        self.p, self.v = p, v
+        self.q = Rotation.from_euler('ZY', [sp.yaw_rad, sp.pitch_rad]).as_quat()
+
+    def run_until(self, predicate, timeout_s, **kw):
+        t_end = self.t_s + timeout_s
+        while not predicate(self):
+            assert self.t_s < t_end, f'timed out in {self.mission.mode}'
+            self.step(**kw)
+
+    def run_for(self, duration_s, **kw):
+        for _ in range(int(round(duration_s / DT_S))):
+            self.step(**kw)
+
+    def run_to(self, mode, timeout_s=60.0, **kw):
+        self.run_until(lambda f: f.mission.mode == mode, timeout_s, **kw)
+
+
+def _hovering(config=None):
+    flight = Flight(config)
+    assert flight.mission.takeoff()[0]
+    flight.run_to(Mode.HOVER)
+    return flight
+
+
+def _in_mode(mode, config=None):
+    flight = Flight(config)
+    assert flight.mission.inspect()[0]
+    flight.run_to(mode, timeout_s=120.0)
+    return flight
+
+
+# a wall leaning back, north of the start point: the tool must yaw and pitch down to face it
+INCLINED = TargetEstimate(np.array([-1.0, 2.5, 1.8]),
+                          np.array([0.0, -0.9, 0.3]) / np.hypot(0.9, 0.3), 0.02, True)
+
+
+@pytest.mark.parametrize('target', [PERFECT, INCLINED])
+def test_happy_path_visits_every_mode_and_succeeds(target):
+    flight = Flight(target=target)
+    ok, _ = flight.mission.inspect()
+    assert ok
+    flight.run_until(lambda f: f.mission.mode == Mode.IDLE, 150.0)
+    assert flight.modes == [Mode.IDLE, Mode.TAKEOFF, Mode.HOVER, Mode.SEARCH, Mode.APPROACH,
+                            Mode.CONTACT, Mode.HOLD, Mode.RETREAT, Mode.LAND, Mode.IDLE]
+    status = flight.mission.status
+    assert status['success'] and status['inspection_completed']
+    assert status['contact_lost'] == 0 and status['failsafe_reason'] == ''
+
+    cfg, tip = flight.config, VEHICLE.tool_tip_x_m
+    by_mode = {}
+    for t, mode, sp, p in flight.log:
+        by_mode.setdefault(mode, []).append((t, sp, p))
+    # the standoff point: tool tip standoff_m from the surface, on the normal through the POI
+    _, sp_end, p_end = by_mode[Mode.APPROACH][-1]
+    r = p_end - target.p_poi_map
+    assert r @ target.normal_map == pytest.approx(cfg.standoff_m + tip, abs=cfg.arrive_tol_m)
+    assert np.linalg.norm(np.cross(r, target.normal_map)) < cfg.arrive_tol_m
+    # the tool (x_FLU) points into the wall along the normal, so it reaches the POI
+    x_flu = Rotation.from_euler('ZY', [sp_end.yaw_rad, sp_end.pitch_rad]).apply([1, 0, 0])
+    np.testing.assert_allclose(x_flu, -target.normal_map, atol=cfg.arrive_yaw_tol_rad)
+    # HOLD: desired position behind the surface by F_d / K_z, held for hold_time_s
+    hold = by_mode[Mode.HOLD]
+    assert hold[-1][1].lambda_d_t[2] == pytest.approx(tip - cfg.contact_force_n
+                                                      / cfg.k_contact_z_n_per_m)
+    assert hold[-1][0] - hold[0][0] == pytest.approx(cfg.hold_time_s, abs=2 * DT_S)
+    # compliant in contact, and while the retreat reference is still behind the surface
+    assert all(sp.contact_gains == (mode in (Mode.CONTACT, Mode.HOLD) or (
+        mode == Mode.RETREAT and sp.lambda_d_t[2] < tip)) for _, mode, sp, _ in flight.log)
+    assert any(mode == Mode.RETREAT and sp.contact_gains for _, mode, sp, _ in flight.log)
+    assert flight.p[2] == pytest.approx(GEAR_Z_M)
+
+
+def test_references_are_consistent_and_speed_limited():
+    flight = Flight()
+    flight.mission.inspect()
+    flight.run_until(lambda f: f.mission.mode == Mode.IDLE, 150.0)
+    cfg = flight.config
+    v_max = max(cfg.climb_speed_m_s, cfg.approach_speed_m_s, cfg.descent_rate_m_s)
+    prev = None
+    for t, mode, sp, _ in flight.log:
+        p_map = sp.origin_map + sp.R_map_t @ sp.lambda_d_t
+        v_map = sp.R_map_t @ sp.dlambda_d_t
+        a_map = sp.R_map_t @ sp.ddlambda_d_t
+        assert np.linalg.norm(v_map) <= v_max * (1 + 1e-9)
+        if prev is not None:
+            # trapezoidal rule: the error is bounded by the jerk, tiny for these segments
+            assert np.allclose(p_map - prev[0], 0.5 * (v_map + prev[1]) * DT_S, atol=1e-5)
+            assert np.allclose(v_map - prev[1], 0.5 * (a_map + prev[2]) * DT_S, atol=1e-4)
+        prev = (p_map, v_map, a_map)
+
+
+def test_nan_setpoint_rejected_and_counted():
+    flight = _hovering()
+    ok, msg = flight.mission.set_hover_setpoint([np.nan, 0.0, 2.0], 0.0)
+    assert not ok and msg
+    ok, _ = flight.mission.set_hover_setpoint([0.0, 0.0, 2.0], np.inf)
+    assert not ok
+    assert flight.mission.status['rejected_setpoints'] == 2
+    assert flight.mission.mode == Mode.HOVER
+    ok, _ = flight.mission.set_hover_setpoint([1.0, -1.0, 2.0], 0.5)
+    assert ok
+    flight.run_for(10.0)
+    np.testing.assert_allclose(flight.p, [1.0, -1.0, 2.0], atol=1e-6)
+    assert flight.log[-1][2].yaw_rad == pytest.approx(0.5)
+    assert flight.mission.mode == Mode.HOVER
+
+
+def test_stale_odometry_blind_descent_then_idle():
+    flight = _hovering()
+    z0 = flight.p[2]
+    frozen = flight.state()
+    sps = []
+    while flight.mission.mode != Mode.IDLE and len(sps) < 3000:
+        sps.append(flight.mission.update(flight.t_s, frozen, PERFECT, 0.0, 0.2))
+        flight.t_s += DT_S
+        if len(sps) == 1:
+            assert flight.mission.mode == Mode.FAILSAFE_LAND
+    cfg = flight.config
+    status = flight.mission.status
+    assert status['failsafe_reason'] == 'odometry_stale' and not status['success']
+    assert flight.mission.mode == Mode.IDLE
+    v_z = np.array([sp.dlambda_d_t[2] for sp in sps])
+    assert np.all(v_z <= 1e-12)
+    assert v_z.min() == pytest.approx(-cfg.failsafe_descent_rate_m_s, rel=1e-3)
+    assert all(sp.pitch_rad == 0.0 and not sp.contact_gains for sp in sps)
+    assert sps[-1].lambda_d_t[2] == pytest.approx(cfg.ground_z_m)
+    # blind: idle only after the whole descent plus the margin
+    t_descent = 1.875 * (z0 - cfg.ground_z_m) / cfg.failsafe_descent_rate_m_s
+    assert len(sps) * DT_S >= t_descent + cfg.failsafe_land_margin_s
+
+
+def test_nonfinite_state_counts_as_stale():
+    flight = _hovering()
+    bad = flight.state()
+    bad.p_map[0] = np.nan
+    flight.mission.update(flight.t_s, bad, PERFECT, 0.0, 0.0)
+    assert flight.mission.mode == Mode.FAILSAFE_LAND
+
+
+def test_force_above_limit_retreats_then_lands():
+    flight = _in_mode(Mode.HOLD)
+    flight.step(force_n=flight.config.force_limit_n + 1.0)
+    assert flight.mission.mode == Mode.RETREAT
+    assert flight.mission.status['failsafe_reason'] == 'force_limit'
+    flight.run_to(Mode.IDLE)
+    assert flight.modes[-3:] == [Mode.RETREAT, Mode.LAND, Mode.IDLE]
+    assert not flight.mission.status['success']
+
+
+def test_target_lost_during_approach_holds_then_retreats():
+    cfg = MissionConfig()
+    flight = _in_mode(Mode.APPROACH, cfg)
+    flight.run_for(1.0)
+    t_lost = flight.t_s       # the last image was taken PERFECT.age_s before the last tick
+    flight.run_to(Mode.TARGET_LOST, target=None, timeout_s=5.0)
+    assert flight.t_s - t_lost == pytest.approx(cfg.target_lost_hold_s - PERFECT.age_s,
+                                                abs=2 * DT_S)
+    flight.run_for(1.5, target=None)
+    assert flight.mission.mode == Mode.TARGET_LOST
+    assert np.linalg.norm(flight.log[-1][2].dlambda_d_t) < 1e-9   # holding still
+    flight.run_to(Mode.RETREAT, target=None, timeout_s=5.0)
+    assert flight.t_s - t_lost == pytest.approx(cfg.target_lost_retreat_s - PERFECT.age_s,
+                                                abs=2 * DT_S)
+    assert flight.mission.status['failsafe_reason'] == 'target_lost'
+
+
+def test_target_reacquired_resumes_approach():
+    flight = _in_mode(Mode.APPROACH)
+    flight.run_to(Mode.TARGET_LOST, target=None, timeout_s=5.0)
+    flight.step()
+    assert flight.mission.mode == Mode.APPROACH
+    flight.run_to(Mode.CONTACT, timeout_s=30.0)
+
+
+def test_contact_lost_during_hold_counted_and_not_success():
+    cfg = MissionConfig()
+    flight = _in_mode(Mode.HOLD, cfg)
+    flight.run_for(1.0)
+    flight.run_for(cfg.contact_lost_s + 0.05, force_n=0.0)
+    assert flight.mission.status['contact_lost'] == 1
+    assert flight.mission.mode == Mode.HOLD
+    flight.run_to(Mode.IDLE, timeout_s=60.0)
+    assert flight.mission.status['contact_lost'] == 1
+    assert not flight.mission.status['success']
+    assert not flight.mission.status['inspection_completed']
+
+
+def test_short_force_dropout_is_not_contact_lost():
+    cfg = MissionConfig()
+    flight = _in_mode(Mode.HOLD, cfg)
+    flight.run_for(cfg.contact_lost_s - 0.03, force_n=0.0)
+    flight.run_to(Mode.IDLE, timeout_s=60.0)
+    assert flight.mission.status['contact_lost'] == 0 and flight.mission.status['success']
+
+
+def test_no_contact_retreats():
+    flight = _in_mode(Mode.CONTACT)
+    flight.run_to(Mode.RETREAT, timeout_s=30.0, force_n=0.0)
+    assert flight.mission.status['failsafe_reason'] == 'no_contact'
+
+
+def test_search_timeout_lands():
+    cfg = MissionConfig(search_timeout_s=2.0, search_yaw_rate_rad_s=0.2)
+    flight = _in_mode(Mode.SEARCH, cfg)
+    flight.run_to(Mode.LAND, target=None, timeout_s=3.0)
+    assert flight.mission.status['failsafe_reason'] == 'target_not_found'
+    search_yaws = [sp.yaw_rad for _, mode, sp, _ in flight.log if mode == Mode.SEARCH]
+    assert search_yaws[-1] - search_yaws[0] == pytest.approx(
+        cfg.search_yaw_rate_rad_s * cfg.search_timeout_s, abs=0.01)
+
+
+def test_abort_in_contact_retreats_then_hovers():
+    flight = _in_mode(Mode.CONTACT)
+    ok, _ = flight.mission.abort()
+    assert ok and flight.mission.mode == Mode.RETREAT
+    flight.run_to(Mode.HOVER, timeout_s=30.0)
+    assert flight.mission.status['failsafe_reason'] == ''
+    flight.run_for(2.0)
+    assert flight.mission.mode == Mode.HOVER
+
+
+def test_abort_in_search_hovers_and_land_lands():
+    flight = _in_mode(Mode.SEARCH)
+    assert flight.mission.abort() == (True, 'hovering')
+    assert flight.mission.mode == Mode.HOVER
+    assert flight.mission.land()[0]
+    flight.run_to(Mode.IDLE, timeout_s=30.0)
+    assert not flight.mission.status['success']
+
+
+def test_services_refused_in_wrong_modes():
+    mission = Mission(VEHICLE)
+    ok, why = mission.takeoff()
+    assert not ok and 'odometry' in why          # no state yet
+    flight = Flight()
+    for call in (flight.mission.abort, flight.mission.land):
+        ok, why = call()
+        assert not ok and 'IDLE' in why
+    ok, why = flight.mission.set_hover_setpoint([0.0, 0.0, 1.0], 0.0)
+    assert not ok and 'HOVER' in why
+    assert flight.mission.status['rejected_setpoints'] == 0
+    flight.mission.update(flight.t_s, flight.state(), None, 0.0, 0.5)
+    assert not flight.mission.takeoff()[0]       # stale odometry on the ground
+    flight.step()
+    assert flight.mission.takeoff()[0]
+    ok, why = flight.mission.takeoff()
+    assert not ok and 'TAKEOFF' in why
+    ok, why = flight.mission.inspect()
+    assert not ok and 'TAKEOFF' in why
+    assert flight.mission.mode == Mode.TAKEOFF
+
+
+def test_min_jerk_boundary_conditions():
+    p0, p1, v0 = np.array([0.0, 1.0, 2.0]), np.array([3.0, -1.0, 2.0]), np.array([0.2, 0, 0])
+    seg = MinJerk(1.0, p0, p1, 0.5, v0)
+    p, v, a = seg.sample(1.0)
+    np.testing.assert_allclose([p, v, a], [p0, v0, np.zeros(3)], atol=1e-12)
+    p, v, a = seg.sample(1.0 + seg.T - 1e-9)
+    np.testing.assert_allclose([p, v, a], [p1, np.zeros(3), np.zeros(3)], atol=1e-6)
+    still = MinJerk(0.0, p0, p1, 0.5)
+    peak = max(np.linalg.norm(still.sample(t)[1]) for t in np.linspace(0, still.T, 1001))
+    assert peak == pytest.approx(0.5, rel=1e-4)
+
+
+def test_inconsistent_timeouts_rejected():
+    with pytest.raises(ConfigError, match='target_lost_retreat_s'):
+        Mission(VEHICLE, MissionConfig(target_lost_hold_s=2.0, target_lost_retreat_s=1.0))

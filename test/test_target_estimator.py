@@ -1,0 +1,187 @@
+"""Tests for uav_tilt_control.target_estimator."""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.config import ConfigError, from_dict
+from uav_tilt_common.state import VehicleState
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control import frames
+from uav_tilt_control.target_estimator import TargetEstimator, TargetEstimatorConfig
+
+RATE_HZ = 300.0
+P_POI_MAP = np.array([3.0, 0.2, 1.4])
+N_MAP = np.array([-1.0, 0.0, 0.0])      # wall at x = 3 facing -x
+VEHICLE = VehicleParams()
+
+
+def _state(t_s, speed_m_s=1.0, yaw_rate=0.0):
+    """Vehicle flying along +y at ``speed_m_s`` while yawing at ``yaw_rate``."""
+    return VehicleState(
+        t_s=t_s,
+        p_map=np.array([1.0, speed_m_s * t_s, 1.5]),
+        q_map_base=Rotation.from_euler('z', yaw_rate * t_s).as_quat(),
+        v_map=np.array([0.0, speed_m_s, 0.0]),
+        w_base=np.array([0.0, 0.0, yaw_rate]))
+
+
+def _estimator(config=None):
+    R_base_cam, p_base_cam = frames.camera_pose_in_base(VEHICLE)
+    return TargetEstimator(config, R_base_cam, p_base_cam)
+
+
+def _fill(est, t_end_s, **kw):
+    for k in range(int(round(t_end_s * RATE_HZ)) + 1):
+        est.add_state(_state(k / RATE_HZ, **kw))
+
+
+def _measurement_at(t_s, p_map=P_POI_MAP, n_map=N_MAP, **kw):
+    """What a perfect camera sees at time ``t_s``: (p_cam, n_cam)."""
+    s = _state(t_s, **kw)
+    R_base_cam, p_base_cam = frames.camera_pose_in_base(VEHICLE)
+    R_map_base = Rotation.from_quat(s.q_map_base).as_matrix()
+    R_map_cam, p_map_cam = frames.compose(R_map_base, s.p_map, R_base_cam, p_base_cam)
+    return R_map_cam.T @ (p_map - p_map_cam), R_map_cam.T @ n_map
+
+
+def test_latency_compensation_moving_vehicle():
+    est = _estimator()
+    _fill(est, 1.0, yaw_rate=0.5)
+    # image taken 50 ms ago, between two odometry samples
+    stamp = 1.0 - 0.05 - 0.4 / RATE_HZ
+    p_cam, n_cam = _measurement_at(stamp, yaw_rate=0.5)
+    assert est.add_measurement(stamp, p_cam, n_cam, None)
+    p_hat, n_hat, age, valid = est.estimate()
+    assert np.linalg.norm(p_hat - P_POI_MAP) < 1e-3
+    np.testing.assert_allclose(n_hat, N_MAP, atol=1e-3)
+    assert age == pytest.approx(1.0 - stamp) and valid
+
+    # the same measurement placed with the newest pose is off by about v * 50 ms = 5 cm
+    naive = _estimator()
+    _fill(naive, 1.0, yaw_rate=0.5)
+    naive.add_measurement(1.0, p_cam, n_cam, None)
+    error = np.linalg.norm(naive.estimate().p_poi_map - P_POI_MAP)
+    assert error > 0.045
+
+
+def test_rotation_matrix_input_and_6x6_covariance():
+    est = _estimator()
+    _fill(est, 0.5)
+    p_cam, n_cam = _measurement_at(0.4)
+    R_map_t, _ = frames.target_frame_from_normal(P_POI_MAP, N_MAP)
+    R_cam_map = Rotation.from_quat(_state(0.4).q_map_base).as_matrix() @ \
+        frames.camera_pose_in_base(VEHICLE)[0]
+    R_cam_t = R_cam_map.T @ R_map_t
+    assert est.add_measurement(0.4, p_cam, R_cam_t, np.eye(6).ravel() * 1e-4)
+    np.testing.assert_allclose(est.estimate().normal_map, N_MAP, atol=1e-9)
+
+
+def test_outlier_rejected_and_counted():
+    est = _estimator()
+    _fill(est, 1.0)
+    for t in (0.5, 0.6, 0.7):
+        assert est.add_measurement(t, *_measurement_at(t), None)
+    p_cam, n_cam = _measurement_at(0.8, p_map=P_POI_MAP + [0.0, 0.5, 0.0])
+    assert not est.add_measurement(0.8, p_cam, n_cam, None)
+    assert est.counters['rejected_gate'] == 1
+    assert np.linalg.norm(est.estimate().p_poi_map - P_POI_MAP) < 1e-6
+
+
+def test_outlier_tight_covariance_rejected_by_mahalanobis():
+    cfg = TargetEstimatorConfig(gate_distance_m=1.0, meas_std_m=0.005)
+    est = _estimator(cfg)
+    _fill(est, 1.0)
+    for t in np.arange(0.1, 0.7, 1.0 / 30.0):
+        est.add_measurement(t, *_measurement_at(t), None)
+    # 10 cm passes the 1 m distance gate, but is 20 sigma off
+    assert not est.add_measurement(0.8, *_measurement_at(0.8, p_map=P_POI_MAP + 0.1), None)
+    assert est.counters['rejected_gate'] == 1
+
+
+def test_reacquisition_after_consistent_rejections():
+    cfg = TargetEstimatorConfig(reacquire_n=5)
+    est = _estimator(cfg)
+    _fill(est, 1.0)
+    est.add_measurement(0.1, *_measurement_at(0.1), None)
+    moved = P_POI_MAP + [0.0, 0.5, 0.0]
+    for k in range(5):
+        t = 0.2 + 0.03 * k
+        est.add_measurement(t, *_measurement_at(t, p_map=moved), None)
+    assert est.counters['rejected_gate'] == 5
+    assert est.counters['reacquired'] == 1
+    assert np.linalg.norm(est.estimate().p_poi_map - moved) < 1e-6
+
+
+def test_nonfinite_rejected():
+    est = _estimator()
+    _fill(est, 1.0)
+    p_cam, n_cam = _measurement_at(0.5)
+    assert not est.add_measurement(0.5, [np.nan, 0.0, 1.0], n_cam, None)
+    assert not est.add_measurement(0.5, p_cam, [np.inf, 0.0, 1.0], None)
+    assert not est.add_measurement(np.nan, p_cam, n_cam, None)
+    assert not est.add_measurement(0.5, p_cam, n_cam, [np.nan] * 9)
+    assert est.counters['rejected_nonfinite'] == 4
+    assert est.estimate() is None
+
+
+def test_no_target_frames_do_not_update():
+    est = _estimator()
+    _fill(est, 1.0)
+    est.add_measurement(0.5, *_measurement_at(0.5), None)
+    before = est.estimate(now_s=1.0)
+    cov = np.zeros(36)
+    cov[0] = -1.0
+    p_cam, n_cam = _measurement_at(0.9, p_map=P_POI_MAP + 0.01)
+    assert not est.add_measurement(0.9, p_cam, n_cam, cov)
+    after = est.estimate(now_s=1.0)
+    assert est.counters['no_target'] == 1
+    np.testing.assert_array_equal(after.p_poi_map, before.p_poi_map)
+    assert after.age_s == pytest.approx(0.5)
+    assert est.time_since_last_s(1.0) == pytest.approx(0.5)
+
+
+def test_stamp_outside_history_rejected():
+    est = _estimator(TargetEstimatorConfig(history_size=30))
+    _fill(est, 1.0)                      # keeps only the last 0.1 s
+    assert not est.add_measurement(0.5, *_measurement_at(0.5), None)
+    assert not est.add_measurement(1.5, *_measurement_at(1.0), None)
+    assert est.counters['rejected_no_pose'] == 2
+
+
+def test_noisy_measurements_converge():
+    rng = np.random.default_rng(1)
+    est = _estimator()
+    _fill(est, 2.0, yaw_rate=0.2)
+    std = 0.01
+    for t in np.arange(0.1, 1.9, 1.0 / 30.0):
+        p_cam, n_cam = _measurement_at(t, yaw_rate=0.2)
+        n_noisy = n_cam + rng.normal(0.0, 0.02, 3)
+        est.add_measurement(t, p_cam + rng.normal(0.0, std, 3), n_noisy, np.eye(3) * std ** 2)
+    p_hat, n_hat, _, _ = est.estimate()
+    # a single measurement is off by about sqrt(3) * 1 cm; the filter averages ~50 of them
+    assert np.linalg.norm(p_hat - P_POI_MAP) < 0.005
+    assert np.degrees(np.arccos(n_hat @ N_MAP)) < 2.0
+    assert est.counters['rejected_gate'] == 0
+
+
+def test_estimate_invalid_when_old():
+    est = _estimator(TargetEstimatorConfig(valid_age_s=0.2))
+    _fill(est, 1.0)
+    est.add_measurement(0.5, *_measurement_at(0.5), None)
+    assert est.estimate(now_s=0.6).valid
+    assert not est.estimate(now_s=0.8).valid
+
+
+def test_ground_truth_mode():
+    est = TargetEstimator()
+    assert est.add_ground_truth(2.0, P_POI_MAP, N_MAP * 3.0)
+    p_hat, n_hat, age, valid = est.estimate(now_s=2.1)
+    np.testing.assert_allclose(p_hat, P_POI_MAP)
+    np.testing.assert_allclose(n_hat, N_MAP)
+    assert valid and age == pytest.approx(0.1)
+    assert not est.add_ground_truth(2.1, [np.nan, 0, 0], N_MAP)
+
+
+def test_config_validation():
+    with pytest.raises(ConfigError, match='gate_distance_m'):
+        from_dict(TargetEstimatorConfig, {'gate_distance_m': -1.0})

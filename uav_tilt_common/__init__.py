@@ -1,0 +1,1 @@
+"""The contract in code: names, frames, rotor geometry, config validation (DESIGN.md)."""

@@ -1,0 +1,166 @@
+"""Conversions between ROS messages and the cores' numpy data (DESIGN section 3)."""
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
+
+from uav_tilt_common import names
+from uav_tilt_common.geometry import quat_to_matrix
+from uav_tilt_common.state import VehicleState
+
+
+def to_stamp(t_s):
+    """builtin_interfaces/Time of a time in seconds (exact for the plant's tick times)."""
+    ns = int(round(t_s * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def from_stamp(stamp):
+    """Seconds of a builtin_interfaces/Time."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_ns(stamp):
+    """Integer nanoseconds of a stamp (exact comparison of tick stamps)."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def _set_xyz(target, values):
+    target.x, target.y, target.z = float(values[0]), float(values[1]), float(values[2])
+
+
+def _set_quat(target, q):
+    target.x, target.y, target.z, target.w = (float(q[0]), float(q[1]), float(q[2]),
+                                              float(q[3]))
+
+
+def odometry_msg(state, stamp, frame_id=names.FRAME_MAP, child=names.FRAME_BASE):
+    """nav_msgs/Odometry; twist in the child frame (base_link) as the message defines."""
+    msg = Odometry()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.child_frame_id = child
+    _set_xyz(msg.pose.pose.position, state.p_map)
+    _set_quat(msg.pose.pose.orientation, state.q_map_base)
+    R = quat_to_matrix(state.q_map_base)
+    _set_xyz(msg.twist.twist.linear, R.T @ state.v_map)
+    _set_xyz(msg.twist.twist.angular, state.w_base)
+    return msg
+
+
+def state_from_odometry(msg):
+    """VehicleState of an Odometry message (map -> base_link, twist in base_link)."""
+    pose, twist = msg.pose.pose, msg.twist.twist
+    q = np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z,
+                  pose.orientation.w])
+    v_base = np.array([twist.linear.x, twist.linear.y, twist.linear.z])
+    return VehicleState(
+        from_stamp(msg.header.stamp),
+        np.array([pose.position.x, pose.position.y, pose.position.z]), q,
+        quat_to_matrix(q) @ v_base,
+        np.array([twist.angular.x, twist.angular.y, twist.angular.z]))
+
+
+def imu_msg(gyro, accel, q, stamp):
+    """sensor_msgs/Imu in base_link."""
+    msg = Imu()
+    msg.header.stamp = stamp
+    msg.header.frame_id = names.FRAME_BASE
+    _set_quat(msg.orientation, q)
+    _set_xyz(msg.angular_velocity, gyro)
+    _set_xyz(msg.linear_acceleration, accel)
+    return msg
+
+
+def wrench_msg(force, torque, stamp, frame_id=names.FRAME_EE):
+    """geometry_msgs/WrenchStamped."""
+    msg = WrenchStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    _set_xyz(msg.wrench.force, force)
+    _set_xyz(msg.wrench.torque, torque)
+    return msg
+
+
+def vector_of(v):
+    """numpy array of a geometry_msgs Vector3/Point."""
+    return np.array([v.x, v.y, v.z])
+
+
+def actuator_msg(thrusts_n, tilts_rad, stamp):
+    """sensor_msgs/JointState: effort = rotor thrust [N], position = tilt [rad]."""
+    msg = JointState()
+    msg.header.stamp = stamp
+    msg.name = list(names.ACTUATOR_NAMES)
+    msg.effort = [float(x) for x in thrusts_n] + [0.0, 0.0]
+    msg.position = [0.0] * 4 + [float(x) for x in tilts_rad]
+    return msg
+
+
+def image_msg(array, stamp, frame_id=names.FRAME_CAMERA):
+    """sensor_msgs/Image: rgb8 for HxWx3 uint8, 32FC1 for HxW float32."""
+    msg = Image()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.height, msg.width = int(array.shape[0]), int(array.shape[1])
+    if array.ndim == 3:
+        msg.encoding, msg.step = 'rgb8', msg.width * 3
+        data = np.ascontiguousarray(array, dtype=np.uint8)
+    else:
+        msg.encoding, msg.step = '32FC1', msg.width * 4
+        data = np.ascontiguousarray(array, dtype='<f4')
+    msg.is_bigendian = 0
+    msg.data = data.tobytes()
+    return msg
+
+
+def array_of_image(msg):
+    """numpy view of an rgb8 or 32FC1 Image; raises ValueError on anything else."""
+    if msg.encoding == 'rgb8':
+        channels, dtype = 3, np.uint8
+    elif msg.encoding == '32FC1':
+        channels, dtype = 1, np.dtype('>f4' if msg.is_bigendian else '<f4')
+    else:
+        raise ValueError(f'unsupported encoding {msg.encoding!r}')
+    itemsize = np.dtype(dtype).itemsize
+    if msg.height == 0 or msg.width == 0 or msg.step != msg.width * channels * itemsize \
+            or len(msg.data) != msg.step * msg.height:
+        raise ValueError(f'inconsistent image {msg.width}x{msg.height} step {msg.step} '
+                         f'with {len(msg.data)} bytes')
+    data = np.frombuffer(bytes(msg.data), dtype=dtype)
+    shape = (msg.height, msg.width, 3) if channels == 3 else (msg.height, msg.width)
+    return data.reshape(shape)
+
+
+def camera_info_msg(cam, stamp, frame_id=names.FRAME_CAMERA):
+    """sensor_msgs/CameraInfo of a CameraConfig (plumb_bob, no distortion)."""
+    msg = CameraInfo()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.width, msg.height = cam.width, cam.height
+    msg.distortion_model = 'plumb_bob'
+    msg.d = [0.0] * 5
+    msg.k = [float(x) for x in cam.k_matrix().reshape(-1)]
+    msg.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    msg.p = [cam.fx, 0.0, cam.cx, 0.0, 0.0, cam.fy, cam.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    return msg
+
+
+def diagnostics_msg(name, values, stamp, level=DiagnosticStatus.OK, message='ok'):
+    """diagnostic_msgs/DiagnosticArray with one status holding ``values`` as key/values."""
+    status = DiagnosticStatus(level=level, name=name, message=message, hardware_id='uav_tilt')
+    status.values = [KeyValue(key=str(k), value=_fmt(v)) for k, v in values.items()]
+    msg = DiagnosticArray()
+    msg.header.stamp = stamp
+    msg.status = [status]
+    return msg
+
+
+def _fmt(value):
+    if isinstance(value, float):
+        return f'{value:.6g}' if math.isfinite(value) else str(value)
+    return str(value)

@@ -1,0 +1,46 @@
+"""Config dataclasses as ROS 2 parameters, and the standard node main()."""
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+
+from uav_tilt_common.config import ConfigError, from_dict, to_flat
+
+
+def declare_config(node, cls):
+    """Declare every field of config ``cls`` as a parameter and return the validated config.
+
+    Raises ConfigError (one line naming the parameter, value and allowed range).
+    """
+    defaults = to_flat(cls())
+    values = {}
+    for name, default in defaults.items():
+        # Empty lists cannot carry a parameter type; those fields are not ROS parameters.
+        if isinstance(default, list) and not default:
+            continue
+        param = node.declare_parameter(name, default)
+        values[name] = param.value
+    return from_dict(cls, values)
+
+
+def run_node(node_factory, args=None):
+    """Create the node, spin it, and shut down cleanly (the ros2/demos pattern).
+
+    A bad parameter ends the process with exit code 2 and one log line.
+    """
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = node_factory()
+        rclpy.spin(node)
+    except ConfigError as err:
+        print(f'[FATAL] {err}', file=sys.stderr, flush=True)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code

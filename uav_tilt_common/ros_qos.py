@@ -1,0 +1,19 @@
+"""QoS profiles of DESIGN section 3."""
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+
+# Control path (imu, odom, ee_wrench, actuators/*): reliable, depth 10.
+CONTROL = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                     history=HistoryPolicy.KEEP_LAST)
+# Camera: published reliable, subscribed best effort depth 1 (REP-2003).
+CAMERA_PUB = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE,
+                        history=HistoryPolicy.KEEP_LAST)
+CAMERA_SUB = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                        history=HistoryPolicy.KEEP_LAST)
+# Status and other low-rate topics.
+STATUS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+# Latched: the last message reaches late joiners (ground_truth/target).
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# /clock: a reliable publisher serves the best-effort subscription of rclpy's TimeSource.
+CLOCK = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                   history=HistoryPolicy.KEEP_LAST)

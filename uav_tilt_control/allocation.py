@@ -1,0 +1,119 @@
+"""Control allocation of the tilting-rotor H quadrotor (article sec. 3.1, DESIGN section 2).
+
+With alpha = beta the article's five equations (1)-(2) have a closed-form solution. They are
+written in the article's frame P (x_P right, y_P forward); inputs and outputs here are FLU.
+For a fixed tilt the four thrusts are linear in (F_total, tau_x_P, tau_y_P, tau_z_P), so the
+saturation handling (give up yaw, then roll/pitch, then clip) is closed form too.
+"""
+import dataclasses
+
+import numpy as np
+
+from uav_tilt_common.config import param
+from uav_tilt_common.geometry import flu_to_p, rotor_wrench_flu
+from uav_tilt_common.vehicle import VehicleParams
+
+# Inputs beyond this are physically meaningless; bounding them keeps the arithmetic finite.
+_INPUT_BOUND = 1e6
+
+
+@dataclasses.dataclass
+class AllocationConfig:
+    """Allocation options. Differential tilt (alpha != beta) is not implemented."""
+
+    min_thrust_n: float = param(0.0, lo=0.0, hi=10.0)  # keep rotors spinning if > 0
+
+
+@dataclasses.dataclass
+class AllocationResult:
+    """Actuator values and what the allocator had to give up (requested - achieved)."""
+
+    thrusts_n: np.ndarray         # rotor_1..4
+    alpha_rad: float
+    beta_rad: float
+    saturated: bool
+    force_given_up_n: np.ndarray  # (x_FLU, z_FLU)
+    torque_given_up_nm: np.ndarray  # FLU
+
+    @property
+    def yaw_given_up_nm(self):
+        """Yaw torque (z_FLU) that could not be produced."""
+        return float(self.torque_given_up_nm[2])
+
+
+class Allocator:
+    """Maps a body force (x_FLU, z_FLU) and torque (FLU) to four thrusts and alpha = beta."""
+
+    def __init__(self, vehicle: VehicleParams, config: AllocationConfig = None):
+        self.vehicle = vehicle
+        self.config = config or AllocationConfig()
+
+    def allocate(self, force_flu_xz, torque_flu) -> AllocationResult:
+        """Solve eq. (1)-(2) with alpha = beta; saturate as yaw, then roll/pitch, then clip."""
+        v = self.vehicle
+        f_lo, f_hi = self.config.min_thrust_n, v.f_max_n
+        force_xz = _sanitize(force_flu_xz, 2)
+        torque = _sanitize(torque_flu, 3)
+        fx, fz = force_xz
+        f_total, tilt_rad = _total_and_tilt(fx, fz, v.tilt_limit_rad)
+        f_total = float(np.clip(f_total, 4.0 * f_lo, 4.0 * f_hi))
+        s, c = np.sin(tilt_rad), np.cos(tilt_rad)
+
+        tau_p = flu_to_p(torque)
+        base = np.full(4, f_total / 4.0)
+        roll_pitch = self._thrusts_from_torque_p(tau_p[0], tau_p[1], 0.0, s, c)
+        yaw = self._thrusts_from_torque_p(0.0, 0.0, tau_p[2], s, c)
+        rp_scale = _max_feasible_scale(base, roll_pitch, f_lo, f_hi)
+        yaw_scale = _max_feasible_scale(base + rp_scale * roll_pitch, yaw, f_lo, f_hi)
+        thrusts = np.clip(base + rp_scale * roll_pitch + yaw_scale * yaw, f_lo, f_hi)
+
+        force_got, torque_got = rotor_wrench_flu(thrusts, tilt_rad, tilt_rad, v.l1_m, v.l2_m,
+                                                 v.k_m)
+        force_lost = force_xz - force_got[[0, 2]]
+        torque_lost = torque - torque_got
+        saturated = bool(rp_scale < 1.0 or yaw_scale < 1.0
+                         or not np.allclose(force_lost, 0.0, atol=1e-9 * (1.0 + f_total)))
+        return AllocationResult(thrusts, tilt_rad, tilt_rad, saturated, force_lost, torque_lost)
+
+    def _thrusts_from_torque_p(self, tau_x_p, tau_y_p, tau_z_p, s, c):
+        """Thrust increments producing the P-frame torque at tilt (s, c) = (sin, cos)."""
+        l1, l2, k = self.vehicle.l1_m, self.vehicle.l2_m, self.vehicle.k_m
+        # eq. (2a): front sum minus rear sum; the total stays unchanged.
+        front_minus_rear = tau_x_p / (l2 * c)
+        # eq. (2b, 2c) in (d1, d2) = (F1 - F4, F2 - F3); determinant -2 l1 k, never singular.
+        a = np.array([[c * l1 + s * k, c * l1 - s * k],
+                      [-(s * l1 - c * k), -(s * l1 + c * k)]])
+        d1, d2 = np.linalg.solve(a, [tau_y_p, tau_z_p])
+        front, rear = front_minus_rear / 2.0, -front_minus_rear / 2.0
+        return 0.5 * np.array([front + d1, rear + d2, rear - d2, front - d1])
+
+
+def _sanitize(values, n):
+    """Finite, bounded float array of length n (non-finite entries become 0)."""
+    arr = np.asarray(values, dtype=float).reshape(n)
+    arr = np.where(np.isfinite(arr), arr, 0.0)
+    return np.clip(arr, -_INPUT_BOUND, _INPUT_BOUND)
+
+
+def _total_and_tilt(fx, fz, tilt_limit_rad):
+    """Total thrust and tilt for the force (fx, fz) in FLU: tan(alpha) = F_x / F_z."""
+    if fz <= 0.0:
+        # Thrust cannot point down: no force, and no reason to move the servos.
+        return 0.0, 0.0
+    tilt_rad = float(np.arctan2(fx, fz))
+    if abs(tilt_rad) <= tilt_limit_rad:
+        return float(np.hypot(fx, fz)), tilt_rad
+    # Beyond the tilt limit keep the vertical component, which holds altitude.
+    tilt_rad = float(np.clip(tilt_rad, -tilt_limit_rad, tilt_limit_rad))
+    return fz / np.cos(tilt_rad), tilt_rad
+
+
+def _max_feasible_scale(base, delta, lo, hi):
+    """Largest s in [0, 1] with lo <= base + s * delta <= hi (base assumed feasible)."""
+    scale = 1.0
+    for b, d in zip(base, delta):
+        if d > 0.0 and b + d > hi:
+            scale = min(scale, (hi - b) / d)
+        elif d < 0.0 and b + d < lo:
+            scale = min(scale, (lo - b) / d)
+    return max(scale, 0.0)

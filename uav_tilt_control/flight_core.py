@@ -1,0 +1,84 @@
+"""One tick of the PX4-side flight control: impedance -> attitude -> allocation.
+
+The impedance force in map is split by :func:`attitude_setpoint`: yaw and pitch come from the
+setpoint and roll removes the y_FLU part; the x_FLU part is made by tilting the arms (the
+article's decoupling), so moving along x_FLU needs no pitching.
+"""
+import dataclasses
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.config import nested
+from uav_tilt_common.state import ActuatorCommand, VehicleState
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control.allocation import AllocationConfig, Allocator
+from uav_tilt_control.attitude import AttitudeConfig, AttitudePid, attitude_setpoint
+from uav_tilt_control.impedance import ImpedanceConfig, ImpedanceController
+from uav_tilt_control.types import ImpedanceSetpoint
+
+
+@dataclasses.dataclass
+class FlightCoreConfig:
+    """The impedance, attitude and allocation configs of the flight core."""
+
+    impedance: ImpedanceConfig = nested(ImpedanceConfig)
+    attitude: AttitudeConfig = nested(AttitudeConfig)
+    allocation: AllocationConfig = nested(AllocationConfig)
+
+
+class FlightCore:
+    """Pure control core: its only state is the filters and integrators of its parts."""
+
+    def __init__(self, vehicle: VehicleParams, config: FlightCoreConfig = None):
+        self.vehicle = vehicle
+        self.config = config or FlightCoreConfig()
+        self.impedance = ImpedanceController(vehicle.mass_kg, self.config.impedance)
+        self.attitude = AttitudePid(vehicle.inertia_kgm2, self.config.attitude)
+        self.allocator = Allocator(vehicle, self.config.allocation)
+
+    def reset(self):
+        """Clear filter and integrator state (e.g. on arming)."""
+        self.impedance.reset()
+        self.attitude.reset()
+
+    def safe_command(self):
+        """Hover thrust at zero tilt: what is sent when the inputs cannot be trusted."""
+        return ActuatorCommand(np.full(4, self.vehicle.hover_thrust_n), 0.0, 0.0)
+
+    def step(self, state: VehicleState, setpoint: ImpedanceSetpoint, f_contact_map, dt_s):
+        """One control tick; returns (ActuatorCommand, diagnostics dict)."""
+        if not _inputs_finite(state, setpoint, f_contact_map, dt_s):
+            return self.safe_command(), {'input_fault': True, 'saturated': False}
+
+        f_p_map = self.impedance.update(state.p_map, state.v_map, setpoint, f_contact_map, dt_s)
+        R_map_base_d, _, _ = attitude_setpoint(f_p_map, setpoint.yaw_rad, setpoint.pitch_rad,
+                                               self.config.attitude.roll_limit_rad)
+        # Split the force on the attitude actually flown, so the tilt makes the x_FLU part
+        # right away while the attitude loop is still converging.
+        f_body = Rotation.from_quat(state.q_map_base).inv().apply(f_p_map)
+        torque_flu = self.attitude.update(R_map_base_d, state, dt_s)
+        result = self.allocator.allocate(f_body[[0, 2]], torque_flu)
+        command = ActuatorCommand(result.thrusts_n, result.alpha_rad, result.beta_rad)
+        diagnostics = {
+            'input_fault': False,
+            'saturated': result.saturated,
+            'f_p_map': f_p_map,
+            'f_contact_map_filtered': self.impedance.f_contact_map.copy(),
+            'R_map_base_d': R_map_base_d,
+            'torque_flu': torque_flu,
+            'force_given_up_n': result.force_given_up_n,
+            'torque_given_up_nm': result.torque_given_up_nm,
+        }
+        return command, diagnostics
+
+
+def _inputs_finite(state, setpoint, f_contact_map, dt_s):
+    arrays = [state.p_map, state.q_map_base, state.v_map, state.w_base, f_contact_map,
+              setpoint.R_map_t, setpoint.origin_map, setpoint.lambda_d_t, setpoint.dlambda_d_t,
+              setpoint.ddlambda_d_t, [setpoint.yaw_rad, setpoint.pitch_rad, dt_s]]
+    try:
+        finite = all(np.all(np.isfinite(np.asarray(a, dtype=float))) for a in arrays)
+    except (TypeError, ValueError):
+        return False
+    return finite and dt_s > 0.0 and np.linalg.norm(state.q_map_base) > 0.5

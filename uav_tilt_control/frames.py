@@ -1,0 +1,83 @@
+"""Frame helpers for the mission layer (DESIGN section 2): camera mount, target frame t, yaw.
+
+Rotations are 3x3 matrices R_a_b mapping vectors from frame b to frame a; positions p_a_b
+are the origin of b expressed in a.
+"""
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+# Optical axes (x right, y down, z forward) in FLU for a camera looking along +x_FLU.
+_R_FLU_OPTICAL = np.array([
+    [0.0, 0.0, 1.0],
+    [-1.0, 0.0, 0.0],
+    [0.0, -1.0, 0.0],
+])
+
+_E_Z = np.array([0.0, 0.0, 1.0])
+# Below this horizontal norm a normal counts as vertical and the horizontal axis is
+# taken from map x, so that the frame stays deterministic.
+_VERTICAL_EPS = 1e-6
+
+
+def camera_pose_in_base(vehicle):
+    """Pose of ``camera_color_optical_frame`` in base_link: (R_base_cam, p_base_cam).
+
+    The camera looks along +x_FLU, pitched down by ``vehicle.camera_pitch_rad``
+    (a positive rotation about +y_FLU turns x_FLU downwards).
+    """
+    R_pitch = Rotation.from_euler('y', vehicle.camera_pitch_rad).as_matrix()
+    return R_pitch @ _R_FLU_OPTICAL, np.asarray(vehicle.camera_xyz_m, dtype=float).copy()
+
+
+def unit(v):
+    """``v`` normalised; raises ValueError for a zero or non-finite vector."""
+    v = np.asarray(v, dtype=float)
+    norm = np.linalg.norm(v)
+    if not np.isfinite(norm) or norm < 1e-12:
+        raise ValueError(f'cannot normalise {v!r}')
+    return v / norm
+
+
+def target_frame_from_normal(p_poi_map, normal_map):
+    """Target frame t at the point of interest: returns (R_map_t, origin_map).
+
+    z_t is the surface normal (out of the wall), x_t is horizontal along the wall and
+    y_t = z_t x x_t points up along the wall. For a vertical normal x_t is x_map
+    (projected on the surface).
+    """
+    z_t = unit(normal_map)
+    x_t = np.cross(_E_Z, z_t)
+    if np.linalg.norm(x_t) < _VERTICAL_EPS:
+        x_t = np.array([1.0, 0.0, 0.0]) - z_t * z_t[0]
+    x_t = unit(x_t)
+    y_t = np.cross(z_t, x_t)
+    return np.column_stack([x_t, y_t, z_t]), np.asarray(p_poi_map, dtype=float).copy()
+
+
+def yaw_facing(normal_map, default_rad=0.0):
+    """Heading (rad, ENU) that points x_FLU into the wall, i.e. along -normal projected
+    on the horizontal plane; ``default_rad`` when the normal is vertical."""
+    n = np.asarray(normal_map, dtype=float)
+    if np.hypot(n[0], n[1]) < _VERTICAL_EPS:
+        return float(default_rad)
+    return float(np.arctan2(-n[1], -n[0]))
+
+
+def pitch_facing(normal_map):
+    """Pitch (rad, positive nose down) that points x_FLU along -normal."""
+    return float(np.arcsin(np.clip(unit(normal_map)[2], -1.0, 1.0)))
+
+
+def compose(R_a_b, p_a_b, R_b_c, p_b_c):
+    """Pose of c in a from the pose of b in a and of c in b: (R_a_c, p_a_c)."""
+    return R_a_b @ R_b_c, p_a_b + R_a_b @ p_b_c
+
+
+def to_frame(R_map_t, origin_map, p_map):
+    """Express a map point in frame t."""
+    return R_map_t.T @ (np.asarray(p_map, dtype=float) - origin_map)
+
+
+def wrap_angle(a_rad):
+    """Angle wrapped to [-pi, pi)."""
+    return float((a_rad + np.pi) % (2.0 * np.pi) - np.pi)

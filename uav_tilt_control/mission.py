@@ -1,0 +1,515 @@
+"""Inspection mission and failsafes: a state machine that outputs ImpedanceSetpoints.
+
+IDLE -> TAKEOFF -> HOVER -> SEARCH -> APPROACH -> CONTACT -> HOLD -> RETREAT -> LAND -> IDLE,
+with TARGET_LOST (hold while the target is not seen) and FAILSAFE_LAND (blind descent on
+stale odometry), modelled on PX4's failsafes. Free flight uses the map frame; from APPROACH
+on, the target frame t of the estimate (z_t = surface normal). References are quintic
+(minimum-jerk) segments so that lambda_d, dlambda_d and ddlambda_d stay consistent.
+"""
+import collections
+import dataclasses
+import enum
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.config import ConfigError, param
+from uav_tilt_control import frames
+from uav_tilt_control.types import ImpedanceSetpoint
+
+# Shortest reference segment: bounds the accelerations of a segment that only has to
+# bring the reference velocity to rest.
+_MIN_SEGMENT_S = 1.0
+# Peak speed of a minimum-jerk segment is 1.875 * distance / duration.
+_MIN_JERK_PEAK = 1.875
+
+
+class Mode(str, enum.Enum):
+    """Mission modes (the value is what status reports)."""
+
+    IDLE = 'IDLE'
+    TAKEOFF = 'TAKEOFF'
+    HOVER = 'HOVER'
+    SEARCH = 'SEARCH'
+    APPROACH = 'APPROACH'
+    CONTACT = 'CONTACT'
+    HOLD = 'HOLD'
+    TARGET_LOST = 'TARGET_LOST'
+    RETREAT = 'RETREAT'
+    LAND = 'LAND'
+    FAILSAFE_LAND = 'FAILSAFE_LAND'
+
+
+NEAR_WALL = (Mode.APPROACH, Mode.CONTACT, Mode.HOLD, Mode.TARGET_LOST)
+
+
+@dataclasses.dataclass
+class MissionConfig:
+    """Mission geometry, speeds, detection thresholds and failsafe timeouts."""
+
+    takeoff_altitude_m: float = param(1.5, lo=0.3, hi=20.0)
+    climb_speed_m_s: float = param(0.5, lo=0.05, hi=3.0)
+    hover_speed_m_s: float = param(0.5, lo=0.05, hi=3.0)
+    hover_settle_s: float = param(1.0, lo=0.0, hi=30.0)     # HOVER before SEARCH on inspect
+    yaw_rate_rad_s: float = param(0.5, lo=0.05, hi=3.0)
+    search_yaw_rate_rad_s: float = param(0.0, lo=0.0, hi=1.0)  # 0: hover and wait
+    search_timeout_s: float = param(20.0, lo=0.5, hi=600.0)
+    standoff_m: float = param(0.6, lo=0.1, hi=5.0)          # tool tip to surface
+    approach_speed_m_s: float = param(0.3, lo=0.05, hi=2.0)
+    pitch_to_normal: bool = param(True)                     # align the tool with the normal
+    max_pitch_rad: float = param(0.5, lo=0.0, hi=1.0)
+    contact_force_n: float = param(5.0, lo=0.0, hi=20.0)
+    k_contact_z_n_per_m: float = param(100.0, lo=1.0, hi=10000.0)  # impedance K_z in contact
+    contact_speed_m_s: float = param(0.1, lo=0.01, hi=0.5)  # peak speed of the contact ramp
+    contact_threshold_n: float = param(1.0, lo=0.05, hi=20.0)
+    contact_detect_ticks: int = param(3, lo=1, hi=100)
+    contact_timeout_s: float = param(5.0, lo=0.5, hi=60.0)  # after the ramp, no contact
+    contact_lost_s: float = param(0.1, lo=0.0, hi=5.0)
+    hold_time_s: float = param(5.0, lo=0.0, hi=600.0)
+    force_limit_n: float = param(15.0, lo=1.0, hi=100.0)
+    target_lost_hold_s: float = param(0.5, lo=0.05, hi=60.0)
+    target_lost_retreat_s: float = param(3.0, lo=0.1, hi=600.0)
+    odom_stale_s: float = param(0.1, lo=0.005, hi=5.0)
+    descent_rate_m_s: float = param(0.3, lo=0.05, hi=2.0)
+    failsafe_descent_rate_m_s: float = param(0.2, lo=0.05, hi=2.0)
+    failsafe_land_margin_s: float = param(2.0, lo=0.0, hi=60.0)  # blind: after the descent
+    ground_z_m: float = param(0.0, lo=-100.0, hi=100.0)
+    land_detect_height_m: float = param(0.3, lo=0.0, hi=2.0)  # above ground_z_m
+    land_detect_speed_m_s: float = param(0.1, lo=0.01, hi=1.0)
+    land_detect_s: float = param(0.5, lo=0.0, hi=10.0)
+    arrive_tol_m: float = param(0.05, lo=0.001, hi=1.0)
+    arrive_speed_m_s: float = param(0.1, lo=0.001, hi=1.0)
+    arrive_yaw_tol_rad: float = param(0.05, lo=0.001, hi=1.0)
+
+
+class MinJerk:
+    """Quintic from (p0, v0, a=0) to (p1, v=0, a=0) with peak speed about v_max."""
+
+    def __init__(self, t0_s, p0, p1, v_max, v0=np.zeros(3)):
+        self.t0_s = t0_s
+        self.p1 = np.asarray(p1, dtype=float).copy()
+        d = self.p1 - p0
+        self.T = max(_MIN_JERK_PEAK * np.linalg.norm(d) / v_max, _MIN_SEGMENT_S)
+        T = self.T
+        self._c = np.array([p0, v0, np.zeros(3),
+                            (20 * d - 12 * v0 * T) / (2 * T ** 3),
+                            (-30 * d + 16 * v0 * T) / (2 * T ** 4),
+                            (12 * d - 6 * v0 * T) / (2 * T ** 5)], dtype=float)
+
+    def done(self, t_s):
+        """True once the segment has reached p1."""
+        return t_s >= self.t0_s + self.T
+
+    def sample(self, t_s):
+        """(p, v, a) at ``t_s``; held at p1 after the end."""
+        if self.done(t_s):
+            return self.p1.copy(), np.zeros(3), np.zeros(3)
+        tau = max(t_s - self.t0_s, 0.0)
+        c = self._c
+        p = sum(c[i] * tau ** i for i in range(6))
+        v = sum(i * c[i] * tau ** (i - 1) for i in range(1, 6))
+        a = sum(i * (i - 1) * c[i] * tau ** (i - 2) for i in range(2, 6))
+        return p, v, a
+
+
+class Mission:
+    """Inspection state machine; call :meth:`update` every control tick."""
+
+    def __init__(self, vehicle, config=None):
+        self.vehicle = vehicle
+        self.config = config or MissionConfig()
+        if self.config.target_lost_retreat_s <= self.config.target_lost_hold_s:
+            raise ConfigError(
+                f"parameter 'target_lost_retreat_s' = {self.config.target_lost_retreat_s!r} "
+                f"must exceed target_lost_hold_s = {self.config.target_lost_hold_s!r}")
+        self._mode = Mode.IDLE
+        self._now_s = None
+        self._t_mode_s = 0.0
+        self._state = None
+        self._odom_age_s = np.inf
+        self._R_map_t = np.eye(3)
+        self._origin_map = np.zeros(3)
+        self._traj = None
+        self._yaw_ref = 0.0
+        self._yaw_goal = 0.0
+        self._pitch = 0.0
+        self._contact_gains = False
+        self._inspect_pending = False
+        self._after_retreat = Mode.LAND
+        self._resume_mode = Mode.APPROACH
+        self._target_seen_s = -np.inf
+        self._last_tick_s = None
+        self._landing_since_s = None
+        self._contact_ticks = 0
+        self._no_force_since_s = None
+        self._in_contact = False
+        self._hold_completed = False
+        self._success = False
+        self._failsafe_reason = ''
+        self.contact_lost = 0
+        self.rejected_setpoints = 0
+        self.events = collections.deque(maxlen=200)
+
+    @property
+    def mode(self):
+        """Current :class:`Mode`."""
+        return self._mode
+
+    @property
+    def status(self):
+        """Mode, time in mode, failsafe reason and outcome of the inspection."""
+        return dict(
+            mode=self._mode.value,
+            time_in_mode_s=0.0 if self._now_s is None else self._now_s - self._t_mode_s,
+            failsafe_reason=self._failsafe_reason,
+            inspection_completed=self._hold_completed,
+            success=self._success,
+            contact_lost=self.contact_lost,
+            in_contact=self._in_contact,
+            rejected_setpoints=self.rejected_setpoints,
+        )
+
+    # ---- commands (std_srvs/Trigger later): each returns (accepted, message) ----
+
+    def takeoff(self):
+        """IDLE -> TAKEOFF, then HOVER."""
+        ok, why = self._can_arm()
+        if not ok:
+            return False, why
+        self._inspect_pending = False
+        self._enter(Mode.TAKEOFF)
+        return True, 'taking off'
+
+    def inspect(self):
+        """Run the inspection: from IDLE take off first, from HOVER start SEARCH."""
+        if self._mode == Mode.HOVER:
+            self._start_inspection()
+            self._enter(Mode.SEARCH)
+            return True, 'searching for the target'
+        ok, why = self._can_arm()
+        if not ok:
+            return False, why
+        self._start_inspection()
+        self._inspect_pending = True
+        self._enter(Mode.TAKEOFF)
+        return True, 'taking off for inspection'
+
+    def abort(self):
+        """Leave the wall (RETREAT) when near it, else stop and HOVER."""
+        self._inspect_pending = False
+        if self._mode in NEAR_WALL or self._mode == Mode.RETREAT:
+            self._after_retreat = Mode.HOVER
+            if self._mode != Mode.RETREAT:
+                self._enter(Mode.RETREAT, 'abort')
+            return True, 'retreating from the wall'
+        if self._mode in (Mode.TAKEOFF, Mode.SEARCH, Mode.LAND, Mode.HOVER):
+            if self._mode != Mode.HOVER:
+                self._enter(Mode.HOVER, 'abort')
+            return True, 'hovering'
+        return False, f'nothing to abort in {self._mode.value}'
+
+    def land(self):
+        """Land here; near the wall retreat first."""
+        self._inspect_pending = False
+        if self._mode in NEAR_WALL or self._mode == Mode.RETREAT:
+            self._after_retreat = Mode.LAND
+            if self._mode != Mode.RETREAT:
+                self._enter(Mode.RETREAT, 'land requested')
+            return True, 'retreating, then landing'
+        if self._mode in (Mode.TAKEOFF, Mode.HOVER, Mode.SEARCH, Mode.LAND):
+            if self._mode != Mode.LAND:
+                self._enter(Mode.LAND)
+            return True, 'landing'
+        return False, f'cannot land from {self._mode.value}'
+
+    def set_hover_setpoint(self, p_map, yaw_rad):
+        """Move the hover point (map, ENU) and heading; only in HOVER."""
+        p = np.asarray(p_map, dtype=float)
+        if p.shape != (3,) or not (np.all(np.isfinite(p)) and np.isfinite(yaw_rad)):
+            self.rejected_setpoints += 1
+            return False, 'setpoint must be 3 finite coordinates and a finite yaw'
+        if self._mode != Mode.HOVER:
+            return False, f'setpoints are accepted in HOVER only, not {self._mode.value}'
+        self._plan(p, self.config.hover_speed_m_s)
+        self._yaw_goal = float(yaw_rad)
+        return True, 'setpoint accepted'
+
+    # ---- the tick ----
+
+    def update(self, now_s, state, target, f_contact_n, odom_age_s):
+        """One control tick: returns the ImpedanceSetpoint for the impedance law.
+
+        ``target``: TargetEstimate(p_poi_map, normal_map, age_s, valid) or None;
+        ``f_contact_n``: force along the normal from the F/T sensor, positive pushing;
+        ``odom_age_s``: age of the odometry in ``state``.
+        """
+        cfg = self.config
+        self._now_s = float(now_s)
+        self._odom_age_s = float(odom_age_s)
+        stale = not (odom_age_s <= cfg.odom_stale_s and _finite_state(state))
+        if not stale:
+            self._state = state
+        if self._state is None:
+            return ImpedanceSetpoint()
+        if stale and self._mode not in (Mode.IDLE, Mode.FAILSAFE_LAND):
+            self._failsafe('odometry_stale', Mode.FAILSAFE_LAND)
+        if self._target_usable(target):
+            self._target_seen_s = max(self._target_seen_s, now_s - target[2])
+        # a broken F/T reading cannot prove contact, nor trip the force limit
+        f_n = float(f_contact_n) if np.isfinite(f_contact_n) else 0.0
+        if self._mode in NEAR_WALL and f_n > cfg.force_limit_n:
+            self._failsafe('force_limit', Mode.RETREAT)
+        getattr(self, '_tick_' + self._mode.value.lower())(target, f_n, stale)
+        return self._setpoint()
+
+    # ---- per-mode logic ----
+
+    def _tick_idle(self, target, f_n, stale):
+        # keep the reference on the vehicle so that a takeoff starts from where it is
+        self._traj = MinJerk(self._now_s, self._state.p_map, self._state.p_map, 1.0)
+        self._yaw_ref = self._yaw_goal = _yaw_of(self._state)
+
+    def _tick_takeoff(self, target, f_n, stale):
+        if self._arrived():
+            self._enter(Mode.HOVER)
+
+    def _tick_hover(self, target, f_n, stale):
+        if self._inspect_pending and self._time_in_mode() >= self.config.hover_settle_s:
+            self._inspect_pending = False
+            self._enter(Mode.SEARCH)
+
+    def _tick_search(self, target, f_n, stale):
+        cfg = self.config
+        if self._target_usable(target):
+            self._enter(Mode.APPROACH, target=target)
+        elif self._time_in_mode() > cfg.search_timeout_s:
+            self._failsafe('target_not_found', Mode.LAND)
+
+    def _tick_approach(self, target, f_n, stale):
+        if self._check_target_lost():
+            return
+        self._track_target(target)
+        yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
+        if self._arrived() and abs(yaw_err) < self.config.arrive_yaw_tol_rad:
+            self._enter(Mode.CONTACT)
+
+    def _tick_contact(self, target, f_n, stale):
+        cfg = self.config
+        if self._check_target_lost():
+            return
+        self._track_target(target)
+        self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.contact_threshold_n else 0
+        if self._contact_ticks >= cfg.contact_detect_ticks:
+            self._enter(Mode.HOLD)
+        elif self._now_s > self._traj.t0_s + self._traj.T + cfg.contact_timeout_s:
+            self._failsafe('no_contact', Mode.RETREAT)
+
+    def _tick_hold(self, target, f_n, stale):
+        cfg = self.config
+        if f_n > cfg.contact_threshold_n:
+            self._no_force_since_s = None
+            self._in_contact = True
+        elif self._no_force_since_s is None:
+            self._no_force_since_s = self._now_s
+        elif self._in_contact and self._now_s - self._no_force_since_s > cfg.contact_lost_s:
+            self._in_contact = False
+            self.contact_lost += 1
+            self._event('contact lost')
+        if self._time_in_mode() >= cfg.hold_time_s:
+            self._hold_completed = self.contact_lost == 0 and not self._failsafe_reason
+            self._after_retreat = Mode.LAND
+            self._enter(Mode.RETREAT, 'hold complete')
+
+    def _tick_target_lost(self, target, f_n, stale):
+        cfg = self.config
+        if self._target_usable(target):
+            self._enter(self._resume_mode, 'target reacquired', target=target)
+        elif self._now_s - self._target_seen_s > cfg.target_lost_retreat_s:
+            self._failsafe('target_lost', Mode.RETREAT)
+
+    def _tick_retreat(self, target, f_n, stale):
+        if self._arrived():
+            self._enter(self._after_retreat)
+
+    def _tick_land(self, target, f_n, stale):
+        cfg = self.config
+        low = self._state.p_map[2] < cfg.ground_z_m + cfg.land_detect_height_m
+        slow = np.linalg.norm(self._state.v_map) < cfg.land_detect_speed_m_s
+        if not (low and slow):
+            self._landing_since_s = None
+        elif self._landing_since_s is None:
+            self._landing_since_s = self._now_s
+        elif self._now_s - self._landing_since_s >= cfg.land_detect_s:
+            self._success = self._hold_completed
+            self._enter(Mode.IDLE, 'landed')
+
+    def _tick_failsafe_land(self, target, f_n, stale):
+        # blind: position cannot be trusted, so landing is declared after the time the
+        # descent needs plus a margin, unless fresh odometry shows it earlier
+        if not stale:
+            self._tick_land(target, f_n, stale)
+        elif self._now_s > self._traj.t0_s + self._traj.T + self.config.failsafe_land_margin_s:
+            self._enter(Mode.IDLE, 'landed (blind)')
+
+    # ---- helpers ----
+
+    def _enter(self, mode, reason='', target=None):
+        cfg = self.config
+        old = self._mode
+        self._mode = mode
+        self._t_mode_s = self._now_s
+        self._event(reason, old)
+        self._contact_gains = mode in (Mode.CONTACT, Mode.HOLD) or (
+            mode == Mode.TARGET_LOST and self._contact_gains)
+        if mode == Mode.TAKEOFF:
+            p_meas = self._state.p_map
+            goal = np.array([p_meas[0], p_meas[1], cfg.takeoff_altitude_m])
+            self._to_map()
+            self._traj = MinJerk(self._now_s, p_meas, goal, cfg.climb_speed_m_s)
+        elif mode in (Mode.HOVER, Mode.SEARCH):
+            self._to_map()
+            self._plan(self._ref_map()[0], cfg.hover_speed_m_s)
+            self._yaw_goal = self._yaw_ref
+        elif mode == Mode.APPROACH:
+            ref_map = self._ref_map()
+            self._set_target_frame(target)
+            self._plan_t(self._standoff_t(), cfg.approach_speed_m_s, ref_map)
+        elif mode == Mode.CONTACT:
+            self._contact_ticks = 0
+            depth = cfg.contact_force_n / cfg.k_contact_z_n_per_m
+            self._plan_t(np.array([0.0, 0.0, self.vehicle.tool_tip_x_m - depth]),
+                         cfg.contact_speed_m_s)
+        elif mode == Mode.HOLD:
+            self._in_contact = True
+            self._no_force_since_s = None
+        elif mode == Mode.TARGET_LOST:
+            self._resume_mode = old
+            self._plan_t(self._ref_t()[0], cfg.approach_speed_m_s)
+        elif mode == Mode.RETREAT:
+            self._plan_t(self._standoff_t(), cfg.approach_speed_m_s)
+        elif mode in (Mode.LAND, Mode.FAILSAFE_LAND):
+            self._landing_since_s = None
+            rate = cfg.descent_rate_m_s if mode == Mode.LAND else cfg.failsafe_descent_rate_m_s
+            p0 = self._ref_map()[0]
+            self._plan(np.array([p0[0], p0[1], cfg.ground_z_m]), rate)
+            self._yaw_goal = self._yaw_ref
+            self._pitch = 0.0
+
+    def _event(self, reason, old=None):
+        self.events.append(dict(t_s=self._now_s, mode=self._mode.value,
+                                previous=None if old is None else old.value, reason=reason))
+
+    def _failsafe(self, reason, mode):
+        self._failsafe_reason = reason
+        self._hold_completed = False
+        self._inspect_pending = False
+        if mode == Mode.RETREAT:
+            self._after_retreat = Mode.LAND
+        self._enter(mode, reason)
+
+    def _start_inspection(self):
+        self._hold_completed = False
+        self._success = False
+        self._failsafe_reason = ''
+        self.contact_lost = 0
+        self._target_seen_s = -np.inf
+
+    def _can_arm(self):
+        if self._mode != Mode.IDLE:
+            return False, f'already flying ({self._mode.value})'
+        if self._state is None or not self._odom_age_s <= self.config.odom_stale_s:
+            return False, 'no fresh odometry'
+        return True, ''
+
+    def _time_in_mode(self):
+        return self._now_s - self._t_mode_s
+
+    def _target_usable(self, target):
+        return target is not None and bool(target[3])
+
+    def _check_target_lost(self):
+        if self._now_s - self._target_seen_s > self.config.target_lost_hold_s:
+            self._enter(Mode.TARGET_LOST, 'target lost')
+            return True
+        return False
+
+    def _set_target_frame(self, target):
+        cfg = self.config
+        p_poi, n_map = target[0], target[1]
+        R_map_t, origin = frames.target_frame_from_normal(p_poi, n_map)
+        self._R_map_t, self._origin_map = R_map_t, origin
+        self._yaw_goal = frames.yaw_facing(n_map, default_rad=self._yaw_ref)
+        pitch = frames.pitch_facing(n_map) if cfg.pitch_to_normal else 0.0
+        self._pitch = float(np.clip(pitch, -cfg.max_pitch_rad, cfg.max_pitch_rad))
+
+    def _track_target(self, target):
+        # the segment lives in frame t, so a refined estimate moves the whole reference
+        if self._target_usable(target):
+            self._set_target_frame(target)
+
+    def _standoff_t(self):
+        return np.array([0.0, 0.0, self.config.standoff_m + self.vehicle.tool_tip_x_m])
+
+    def _to_map(self):
+        """Re-express the current reference in map and make map the working frame."""
+        p, v = self._ref_map()
+        self._R_map_t, self._origin_map = np.eye(3), np.zeros(3)
+        self._traj = MinJerk(self._now_s, p, p, 1.0, v)
+
+    def _ref_t(self):
+        p, v, _ = self._traj.sample(self._now_s)
+        return p, v
+
+    def _ref_map(self):
+        p, v = self._ref_t()
+        return self._origin_map + self._R_map_t @ p, self._R_map_t @ v
+
+    def _plan(self, goal_map, v_max):
+        """New segment in map from the current reference (continuous position and speed)."""
+        self._to_map()
+        p, v = self._ref_t()
+        self._traj = MinJerk(self._now_s, p, goal_map, v_max, v)
+
+    def _plan_t(self, goal_t, v_max, ref_map=None):
+        """New segment in the current target frame from the current reference
+        (``ref_map`` = (p_map, v_map) when the frame has just changed)."""
+        p_map, v_map = ref_map or self._ref_map()
+        R, o = self._R_map_t, self._origin_map
+        self._traj = MinJerk(self._now_s, frames.to_frame(R, o, p_map), goal_t, v_max,
+                             R.T @ v_map)
+
+    def _arrived(self):
+        cfg = self.config
+        if not self._traj.done(self._now_s):
+            return False
+        p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
+        return (np.linalg.norm(p_t - self._traj.p1) < cfg.arrive_tol_m
+                and np.linalg.norm(self._state.v_map) < cfg.arrive_speed_m_s)
+
+    def _setpoint(self):
+        cfg = self.config
+        dt = 0.0 if self._last_tick_s is None else max(self._now_s - self._last_tick_s, 0.0)
+        self._last_tick_s = self._now_s
+        if self._mode == Mode.SEARCH:
+            self._yaw_goal = self._yaw_ref + cfg.search_yaw_rate_rad_s * dt
+        err = frames.wrap_angle(self._yaw_goal - self._yaw_ref)
+        self._yaw_ref = frames.wrap_angle(
+            self._yaw_ref + np.clip(err, -cfg.yaw_rate_rad_s * dt, cfg.yaw_rate_rad_s * dt))
+        p, v, a = self._traj.sample(self._now_s)
+        # leaving the wall, the reference starts behind the surface: keep the compliant
+        # gains until it is out, so the push fades instead of stiffening
+        releasing = self._mode == Mode.RETREAT and p[2] < self.vehicle.tool_tip_x_m
+        return ImpedanceSetpoint(
+            R_map_t=self._R_map_t.copy(), origin_map=self._origin_map.copy(),
+            lambda_d_t=p, dlambda_d_t=v, ddlambda_d_t=a,
+            yaw_rad=self._yaw_ref, pitch_rad=self._pitch,
+            contact_gains=self._contact_gains or releasing)
+
+
+def _finite_state(state):
+    return state is not None and all(
+        np.all(np.isfinite(x)) for x in (state.p_map, state.q_map_base, state.v_map))
+
+
+def _yaw_of(state):
+    return float(Rotation.from_quat(state.q_map_base).as_euler('ZYX')[0])

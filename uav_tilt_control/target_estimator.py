@@ -1,0 +1,211 @@
+"""Target (point of interest) estimate in map from latency-stamped camera measurements.
+
+The vision pose arrives in ``camera_color_optical_frame`` stamped with the image time, tens
+of ms in the past. It is moved to map with the vehicle pose interpolated at that stamp from
+a short state history, gated against the current estimate, and filtered: a Kalman filter on
+the position of a static point and an exponential average on the normal.
+"""
+import bisect
+import collections
+import dataclasses
+import typing
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.config import param
+from uav_tilt_control import frames
+
+
+@dataclasses.dataclass
+class TargetEstimatorConfig:
+    """Gates, filter and history of :class:`TargetEstimator`."""
+
+    history_size: int = param(300, lo=2, hi=10000)          # states kept (1 s at 300 Hz)
+    max_extrapolation_s: float = param(0.02, lo=0.0, hi=0.5)  # stamp newer than last state
+    meas_std_m: float = param(0.01, lo=1e-4, hi=1.0)        # used when no covariance given
+    process_std_m_sqrt_s: float = param(0.003, lo=0.0, hi=1.0)  # drift of the estimate
+    normal_tau_s: float = param(0.3, lo=0.0, hi=10.0)       # normal averaging time constant
+    gate_distance_m: float = param(0.2, lo=0.001, hi=10.0)
+    gate_chi2: float = param(16.27, lo=1.0, hi=1000.0)      # chi2(3 dof) at 99.9 %
+    gate_angle_rad: float = param(0.5, lo=0.01, hi=3.2)
+    reacquire_n: int = param(10, lo=1, hi=1000)             # consistent rejections to reset
+    valid_age_s: float = param(0.5, lo=0.01, hi=10.0)       # estimate older than this: invalid
+
+
+class TargetEstimate(typing.NamedTuple):
+    """What the mission consumes."""
+
+    p_poi_map: np.ndarray
+    normal_map: np.ndarray
+    age_s: float
+    valid: bool
+
+
+class TargetEstimator:
+    """Latency-compensated, gated and filtered POI position and surface normal in map."""
+
+    def __init__(self, config=None, R_base_cam=np.eye(3), p_base_cam=np.zeros(3)):
+        """``R_base_cam``/``p_base_cam``: camera optical frame in base_link
+        (see :func:`frames.camera_pose_in_base`)."""
+        self.config = config or TargetEstimatorConfig()
+        self._R_base_cam = np.asarray(R_base_cam, dtype=float)
+        self._p_base_cam = np.asarray(p_base_cam, dtype=float)
+        self._history = collections.deque(maxlen=self.config.history_size)
+        self._p_map = None
+        self._P = None              # position covariance of the estimate, m^2
+        self._n_map = None
+        self._stamp_s = None        # stamp of the last accepted measurement
+        self._rejected_run = []     # consecutive gated-out measurements in map
+        self.counters = dict(accepted=0, rejected_gate=0, rejected_nonfinite=0,
+                             rejected_no_pose=0, no_target=0, reacquired=0)
+
+    def add_state(self, state):
+        """Record a vehicle state; out-of-order or non-finite states are ignored."""
+        if self._history and state.t_s <= self._history[-1][0]:
+            return
+        if not (np.all(np.isfinite(state.p_map)) and np.all(np.isfinite(state.q_map_base))):
+            return
+        self._history.append((float(state.t_s), np.array(state.p_map, dtype=float),
+                              Rotation.from_quat(state.q_map_base)))
+
+    def pose_at(self, t_s):
+        """Vehicle pose (R_map_base, p_map_base) at ``t_s``: linear position and slerp
+        attitude between the bracketing states, or None outside the history."""
+        if not self._history:
+            return None
+        t_last, p_last, r_last = self._history[-1]
+        if t_s >= t_last:
+            if t_s - t_last > self.config.max_extrapolation_s:
+                return None
+            # a frame slightly newer than the last odometry: the last pose is closest
+            return r_last.as_matrix(), p_last.copy()
+        i = bisect.bisect_right(self._history, t_s, key=lambda s: s[0])
+        if i == 0:
+            return None
+        t0, p0, r0 = self._history[i - 1]
+        t1, p1, r1 = self._history[i]
+        u = (t_s - t0) / (t1 - t0)
+        r_u = r0 * Rotation.from_rotvec(u * (r0.inv() * r1).as_rotvec())
+        return r_u.as_matrix(), p0 + u * (p1 - p0)
+
+    def add_measurement(self, stamp_s, p_cam, n_cam_or_R_cam_t, covariance=None):
+        """Add a vision measurement in the camera optical frame, stamped with the image time.
+
+        ``n_cam_or_R_cam_t`` is the surface normal (3,) or the target orientation (3x3,
+        z_t = normal). ``covariance``: 3x3 position or 6x6 pose covariance (row-major
+        flat allowed) in the camera frame, or None; covariance[0] == -1 means
+        "no target in this frame" (DESIGN section 3). Returns True when accepted.
+        """
+        cov = None if covariance is None else np.asarray(covariance, dtype=float).ravel()
+        if cov is not None and cov.size and cov[0] == -1.0:
+            self.counters['no_target'] += 1
+            return False
+        n_cam = np.asarray(n_cam_or_R_cam_t, dtype=float)
+        if n_cam.shape == (3, 3):
+            n_cam = n_cam[:, 2]
+        p_cam = np.asarray(p_cam, dtype=float)
+        if not (np.isfinite(stamp_s) and np.all(np.isfinite(p_cam)) and np.all(np.isfinite(n_cam))
+                and (cov is None or np.all(np.isfinite(cov)))
+                and np.linalg.norm(n_cam) > 1e-9):
+            self.counters['rejected_nonfinite'] += 1
+            return False
+        pose = self.pose_at(stamp_s)
+        if pose is None:
+            self.counters['rejected_no_pose'] += 1
+            return False
+        R_map_cam, p_map_cam = frames.compose(*pose, self._R_base_cam, self._p_base_cam)
+        p_map = p_map_cam + R_map_cam @ p_cam
+        n_map = frames.unit(R_map_cam @ n_cam)
+        R_meas = self._meas_cov_map(cov, R_map_cam)
+        return self._update(stamp_s, p_map, n_map, R_meas)
+
+    def add_ground_truth(self, stamp_s, p_poi_map, n_map_or_R_map_t):
+        """Evaluation mode: take a ground-truth target pose in map as the estimate."""
+        n_map = np.asarray(n_map_or_R_map_t, dtype=float)
+        if n_map.shape == (3, 3):
+            n_map = n_map[:, 2]
+        p_map = np.asarray(p_poi_map, dtype=float)
+        if not (np.isfinite(stamp_s) and np.all(np.isfinite(p_map))
+                and np.all(np.isfinite(n_map)) and np.linalg.norm(n_map) > 1e-9):
+            self.counters['rejected_nonfinite'] += 1
+            return False
+        self._reset(stamp_s, p_map, frames.unit(n_map), np.zeros((3, 3)))
+        self.counters['accepted'] += 1
+        return True
+
+    def estimate(self, now_s=None):
+        """TargetEstimate(p_poi_map, normal_map, age_s, valid) or None before the first fix.
+
+        ``age_s`` is measured from the last accepted stamp to ``now_s`` (default: the newest
+        vehicle state); valid means younger than ``valid_age_s``.
+        """
+        if self._p_map is None:
+            return None
+        if now_s is None:
+            now_s = self._history[-1][0] if self._history else self._stamp_s
+        age_s = max(0.0, now_s - self._stamp_s)
+        return TargetEstimate(self._p_map.copy(), self._n_map.copy(), age_s,
+                              age_s <= self.config.valid_age_s)
+
+    def time_since_last_s(self, now_s):
+        """Seconds since the last accepted measurement (inf before the first)."""
+        return np.inf if self._stamp_s is None else now_s - self._stamp_s
+
+    def _meas_cov_map(self, cov, R_map_cam):
+        if cov is None:
+            return np.eye(3) * self.config.meas_std_m ** 2
+        if cov.size == 36:
+            cov_cam = cov.reshape(6, 6)[:3, :3]
+        elif cov.size == 9:
+            cov_cam = cov.reshape(3, 3)
+        else:
+            raise ValueError(f'covariance must have 9 or 36 elements, not {cov.size}')
+        # a zero (unknown) covariance from the publisher must not make the gate infinitely
+        # tight, so the configured noise is a floor
+        floor = np.eye(3) * self.config.meas_std_m ** 2
+        return R_map_cam @ cov_cam @ R_map_cam.T + floor
+
+    def _update(self, stamp_s, p_map, n_map, R_meas):
+        cfg = self.config
+        if self._p_map is None:
+            self._reset(stamp_s, p_map, n_map, R_meas)
+            self.counters['accepted'] += 1
+            return True
+        dt = max(0.0, stamp_s - self._stamp_s)
+        P = self._P + np.eye(3) * cfg.process_std_m_sqrt_s ** 2 * dt
+        r = p_map - self._p_map
+        S = P + R_meas
+        angle = np.arccos(np.clip(n_map @ self._n_map, -1.0, 1.0))
+        if (np.linalg.norm(r) > cfg.gate_distance_m or r @ np.linalg.solve(S, r) > cfg.gate_chi2
+                or angle > cfg.gate_angle_rad):
+            self.counters['rejected_gate'] += 1
+            self._maybe_reacquire(stamp_s, p_map, n_map, R_meas)
+            return False
+        self._rejected_run = []
+        K = P @ np.linalg.inv(S)
+        self._p_map = self._p_map + K @ r
+        self._P = (np.eye(3) - K) @ P
+        w = 1.0 if cfg.normal_tau_s == 0.0 else 1.0 - np.exp(-dt / cfg.normal_tau_s)
+        self._n_map = frames.unit(self._n_map + w * (n_map - self._n_map))
+        self._stamp_s = max(self._stamp_s, stamp_s)
+        self.counters['accepted'] += 1
+        return True
+
+    def _maybe_reacquire(self, stamp_s, p_map, n_map, R_meas):
+        # a run of rejected measurements that agree with each other means the estimate is
+        # the outlier (wrong first lock, or the target moved): restart from them
+        run = self._rejected_run
+        if run and np.linalg.norm(p_map - run[-1]) > self.config.gate_distance_m:
+            run.clear()
+        run.append(p_map)
+        if len(run) >= self.config.reacquire_n:
+            self._reset(stamp_s, p_map, n_map, R_meas)
+            self.counters['reacquired'] += 1
+
+    def _reset(self, stamp_s, p_map, n_map, P):
+        self._p_map = np.array(p_map, dtype=float)
+        self._n_map = np.array(n_map, dtype=float)
+        self._P = np.array(P, dtype=float)
+        self._stamp_s = float(stamp_s)
+        self._rejected_run = []

@@ -1,0 +1,23 @@
+"""Data passed between the mission, the impedance law and the attitude loop."""
+import dataclasses
+
+import numpy as np
+
+
+@dataclasses.dataclass
+class ImpedanceSetpoint:
+    """What the high-level impedance law tracks, in the target frame t.
+
+    The target frame has its origin at the point of interest and z_t along the surface
+    normal (out of the wall); in free flight it is ``map`` (R_map_t = I, origin 0).
+    lambda_d_t is the desired position of base_link's origin in frame t.
+    """
+
+    R_map_t: np.ndarray = dataclasses.field(default_factory=lambda: np.eye(3))
+    origin_map: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    lambda_d_t: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    dlambda_d_t: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    ddlambda_d_t: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    yaw_rad: float = 0.0          # desired heading of x_FLU in map
+    pitch_rad: float = 0.0        # held pitch (DESIGN section 2)
+    contact_gains: bool = False   # True: the selective (contact) K, C; False: free flight

@@ -1,0 +1,1 @@
+"""uav_tilt_sim."""

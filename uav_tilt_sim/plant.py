@@ -1,0 +1,252 @@
+"""The plant core: PyBullet physics of vehicle and world, actuators, disturbances, sensors.
+
+No ROS here. :class:`Plant` steps one 300 Hz control tick (4 physics substeps at 1200 Hz)
+for a given :class:`ActuatorCommand` and exposes truth, noisy sensors and the camera.
+"""
+import dataclasses
+
+import numpy as np
+import pybullet as p
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.config import nested, param
+from uav_tilt_common.geometry import quat_to_matrix, rotor_wrench_matrix
+from uav_tilt_common.state import ActuatorCommand, VehicleState
+from uav_tilt_common.vehicle import GRAVITY, VehicleParams
+from uav_tilt_sim import camera as cam_mod
+from uav_tilt_sim import vehicle_body
+from uav_tilt_sim.actuators import RotorBank, Servo
+from uav_tilt_sim.sensors import SensorModel
+from uav_tilt_sim.world import build_world
+
+GRAVITY_MAP = np.array([0.0, 0.0, -GRAVITY])
+SERVO_TORQUE_NM = 5.0
+
+
+@dataclasses.dataclass
+class PlantCoreConfig:
+    """Physics and sensor rates of the plant."""
+
+    physics_hz: float = param(1200.0, lo=100.0, hi=10000.0)
+    substeps: int = param(4, lo=1, hi=20)          # physics steps per control tick
+    solver_iterations: int = param(30, lo=1, hi=500)
+    vehicle: VehicleParams = nested(VehicleParams)
+    camera: cam_mod.CameraConfig = nested(cam_mod.CameraConfig)
+
+    @property
+    def control_hz(self):
+        """Control tick rate (sensor publication rate)."""
+        return self.physics_hz / self.substeps
+
+
+@dataclasses.dataclass
+class TickSensors:
+    """Everything the plant measures at one control tick."""
+
+    t_s: float
+    gyro_rad_s: np.ndarray         # base_link
+    accel_m_s2: np.ndarray         # specific force, base_link
+    q_imu: np.ndarray              # attitude (x, y, z, w), base_link -> map
+    odom: VehicleState             # noisy, mocap-like
+    ee_force_n: np.ndarray         # contact force on the tool, ee_link frame
+    ee_torque_nm: np.ndarray       # contact torque about the tool tip, ee_link frame
+    thrusts_n: np.ndarray          # measured rotor thrusts
+    tilts_rad: np.ndarray          # measured (alpha, beta)
+    in_contact: bool
+
+
+class Plant:
+    """One simulated world; deterministic for a given scenario (seed included)."""
+
+    def __init__(self, config, scenario, render=True):
+        self.config = config
+        self.scenario = scenario
+        self.vehicle = config.vehicle
+        self.dt_physics = 1.0 / config.physics_hz
+        self.dt_tick = config.substeps * self.dt_physics
+        self.render_enabled = render
+        self.client = p.connect(p.DIRECT)
+        p.setGravity(*GRAVITY_MAP, physicsClientId=self.client)
+        p.setPhysicsEngineParameter(fixedTimeStep=self.dt_physics,
+                                    numSolverIterations=config.solver_iterations,
+                                    physicsClientId=self.client)
+        self.world = build_world(self.client, scenario)
+        start = np.asarray(scenario.start_xyz_m, dtype=float)
+        mm = scenario.mismatch
+        ids = vehicle_body.create_vehicle(self.client, self.vehicle, [0, 0, 0],
+                                          np.radians(scenario.start_yaw_deg),
+                                          mm.mass_scale, mm.inertia_scale)
+        self.body = ids.body
+        self.mass_kg = self.vehicle.mass_kg * mm.mass_scale
+        # Resting on its skid when the start height is at or below the ground.
+        start[2] = max(start[2], -ids.bottom_z_m + 0.002)
+        q0 = p.getQuaternionFromEuler([0, 0, np.radians(scenario.start_yaw_deg)])
+        # PyBullet places a base by its centre of mass, which the counterweight offsets.
+        R0 = np.array(p.getMatrixFromQuaternion(q0)).reshape(3, 3)
+        p.resetBasePositionAndOrientation(self.body, (start + R0 @ ids.base_com_offset_m)
+                                          .tolist(), q0, physicsClientId=self.client)
+        self._com_offset = ids.base_com_offset_m
+        self._arm_joints = [vehicle_body.ARM_FRONT, vehicle_body.ARM_REAR]
+        v = self.vehicle
+        self.rotors = RotorBank(v.thrust_tau_s, v.f_max_n, self.dt_physics)
+        self.servos = [Servo(v.servo_bandwidth_hz, v.servo_rate_rad_s, v.tilt_limit_rad,
+                             self.dt_physics) for _ in range(2)]
+        self.rng = np.random.default_rng(scenario.seed)
+        self.sensors = SensorModel(scenario.noise, self.rng)
+        self._gust = np.zeros(3)
+        self._gust_decay = np.exp(-self.dt_physics / scenario.wind.gust_tau_s)
+        self.tick = 0
+        self._prev_v_map = np.zeros(3)
+        self._contact_force_map = np.zeros(3)
+        self._contact_torque_map = np.zeros(3)
+        self.command = ActuatorCommand(np.zeros(4))
+        self._truth = None
+
+    @property
+    def t_s(self):
+        """Simulated time of the current tick."""
+        return self.tick * self.dt_tick
+
+    def close(self):
+        """Release the physics server."""
+        if self.client is not None:
+            p.disconnect(self.client)
+            self.client = None
+
+    def step(self, command=None):
+        """Advance one control tick applying ``command`` (or the last one)."""
+        if command is not None:
+            self.command = command
+        c = self.command
+        v = self.vehicle
+        # Thrust directions follow the arms; over one 3.3 ms tick they move < 0.02 rad.
+        A = rotor_wrench_matrix(*self._tilts(), v.l1_m, v.l2_m, v.k_m)
+        for _ in range(self.config.substeps):
+            wrench_b = A @ self.rotors.step(c.thrusts_n)
+            (a_ref, a_rate), (b_ref, b_rate) = (self.servos[0].step(c.alpha_rad),
+                                                self.servos[1].step(c.beta_rad))
+            p.setJointMotorControlArray(
+                self.body, self._arm_joints, p.POSITION_CONTROL, targetPositions=[a_ref, b_ref],
+                targetVelocities=[a_rate, b_rate], forces=[SERVO_TORQUE_NM] * 2,
+                positionGains=[0.8] * 2, velocityGains=[1.0] * 2, physicsClientId=self.client)
+            pos, quat = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+            vel, _ = p.getBaseVelocity(self.body, physicsClientId=self.client)
+            R = quat_to_matrix(quat)
+            force_map = R @ wrench_b[:3] + self._air_force(np.asarray(vel))
+            # base_link's origin is the rotor centroid; PyBullet's base frame is the hub CoM.
+            origin_map = np.asarray(pos) - R @ self._com_offset
+            p.applyExternalForce(self.body, -1, force_map.tolist(), origin_map.tolist(),
+                                 p.WORLD_FRAME, physicsClientId=self.client)
+            p.applyExternalTorque(self.body, -1, (R @ wrench_b[3:]).tolist(), p.WORLD_FRAME,
+                                  physicsClientId=self.client)
+            p.stepSimulation(physicsClientId=self.client)
+        self.tick += 1
+        self._truth = None
+
+    def set_actuator_state(self, thrusts_n, alpha_rad, beta_rad):
+        """Start the actuators at a state (e.g. hovering, arms tilted), joints included."""
+        self.rotors.thrusts_n[:] = np.clip(thrusts_n, 0.0, self.vehicle.f_max_n)
+        self.command = ActuatorCommand(self.rotors.thrusts_n.copy(), alpha_rad, beta_rad)
+        for joint, servo, angle in zip(self._arm_joints, self.servos, (alpha_rad, beta_rad)):
+            servo.angle_rad, servo.rate_rad_s = angle, 0.0
+            p.resetJointState(self.body, joint, angle, 0.0, physicsClientId=self.client)
+        self._truth = None
+
+    def _air_force(self, vel_map):
+        """Quadratic drag against the air moving at mean wind + gust."""
+        wind = self.scenario.wind
+        std = wind.gust_std_m_s
+        if std > 0.0:
+            a = self._gust_decay
+            self._gust = a * self._gust + std * np.sqrt(1 - a * a) * self.rng.standard_normal(3)
+        rel = np.asarray(wind.mean_m_s) + self._gust - vel_map
+        return wind.drag_n_s2_per_m2 * np.linalg.norm(rel) * rel
+
+    def _tilts(self):
+        states = p.getJointStates(self.body, self._arm_joints, physicsClientId=self.client)
+        return states[0][0], states[1][0]
+
+    def state(self):
+        """True state of base_link (origin at the rotor centroid) at the current tick."""
+        if self._truth is None:
+            self._truth = self._read_truth()
+        return self._truth
+
+    def _read_truth(self):
+        pos, quat = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        lin, ang = p.getBaseVelocity(self.body, physicsClientId=self.client)
+        R = quat_to_matrix(quat)
+        w_map = np.asarray(ang)
+        # Velocity of the base_link origin (rigid body: v_com + w x r).
+        r = -R @ self._com_offset
+        v_map = np.asarray(lin) + _cross(w_map, r)
+        return VehicleState(self.t_s, np.asarray(pos) + r, np.asarray(quat), v_map,
+                            R.T @ w_map)
+
+    def tool_tip_map(self):
+        """Position of ee_link (front of the tool's spherical tip) in map."""
+        s = self.state()
+        return s.p_map + quat_to_matrix(s.q_map_base) @ np.array([self.vehicle.tool_tip_x_m, 0, 0])
+
+    def contact_wrench_ee(self):
+        """Contact force and torque (about the tip) on the tool, in ee_link (FLU axes)."""
+        force = np.zeros(3)
+        torque = np.zeros(3)
+        tip = self.tool_tip_map()
+        for c in p.getContactPoints(bodyA=self.body, linkIndexA=vehicle_body.TOOL,
+                                    physicsClientId=self.client):
+            f = (c[9] * np.asarray(c[7]) + c[10] * np.asarray(c[11])
+                 + c[12] * np.asarray(c[13]))
+            force += f
+            torque += _cross(np.asarray(c[5]) - tip, f)
+        R = quat_to_matrix(self.state().q_map_base)
+        return R.T @ force, R.T @ torque
+
+    def read_sensors(self):
+        """Noisy sensor set of the current tick (IMU, odometry, F/T, actuators)."""
+        truth = self.state()
+        accel_map = (truth.v_map - self._prev_v_map) / self.dt_tick
+        self._prev_v_map = truth.v_map.copy()
+        R = quat_to_matrix(truth.q_map_base)
+        specific = R.T @ (accel_map - GRAVITY_MAP)
+        force, torque = self.contact_wrench_ee()
+        n = self.sensors
+        return TickSensors(
+            t_s=truth.t_s,
+            gyro_rad_s=n.gyro(truth.w_base),
+            accel_m_s2=n.accel(specific),
+            q_imu=truth.q_map_base.copy(),
+            odom=n.odometry(truth),
+            ee_force_n=n.force(force),
+            ee_torque_nm=n.torque(torque),
+            thrusts_n=self.rotors.thrusts_n.copy(),
+            tilts_rad=np.array(self._tilts()),
+            in_contact=bool(np.linalg.norm(force) > 1e-6),
+        )
+
+    def camera_pose(self):
+        """(p_cam_map, R_map_cam) of the optical frame (z forward, x right, y down)."""
+        s = self.state()
+        R_map_base = quat_to_matrix(s.q_map_base)
+        R_base_cam = camera_rotation_in_base(self.vehicle.camera_pitch_rad)
+        p_cam = s.p_map + R_map_base @ np.asarray(self.vehicle.camera_xyz_m)
+        return p_cam, R_map_base @ R_base_cam
+
+    def render(self, lighting=None, segmentation=False):
+        """Render the eye-in-hand camera: (rgb, depth_m, seg)."""
+        p_cam, R_map_cam = self.camera_pose()
+        rgb, depth, seg = cam_mod.render(self.client, self.config.camera, p_cam, R_map_cam,
+                                         lighting, segmentation)
+        return rgb, self.sensors.depth(depth), seg
+
+
+def camera_rotation_in_base(pitch_rad):
+    """R_base_cam: optical axes (z forward, x right, y down) in FLU, pitched down by pitch."""
+    optical = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    return Rotation.from_euler('y', pitch_rad).as_matrix() @ optical
+
+
+def _cross(a, b):
+    """Cross product of two 3-vectors (np.cross costs ~10 us per call)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])

@@ -1,0 +1,95 @@
+"""Scenario files (DESIGN section 5): the world, disturbances, noise, model mismatch, seed."""
+import dataclasses
+import pathlib
+
+from uav_tilt_common.config import ConfigError, load_yaml, nested, param
+
+OBJECT_CLASSES = ('bolt_plate', 'gauge', 'hazard_sign')
+
+DEFAULT_SCENARIO = pathlib.Path(__file__).resolve().parent.parent / 'config' / 'scenarios' \
+    / 'default.yaml'
+
+
+@dataclasses.dataclass
+class WallConfig:
+    """A flat wall. yaw: heading (map, CCW from +x) of the direction from the start to the wall;
+    inclination: top leaning away from the vehicle (positive) about the wall's horizontal axis."""
+
+    position_m: list = param([2.0, 0.0], lo=-50.0, hi=50.0, length=2)  # surface, ground line
+    yaw_deg: float = param(0.0, lo=-180.0, hi=180.0)
+    inclination_deg: float = param(0.0, lo=-30.0, hi=30.0)
+    width_m: float = param(5.0, lo=0.5, hi=50.0)
+    height_m: float = param(3.5, lo=0.5, hi=20.0)
+    stiffness_n_per_m: float = param(4000.0, lo=100.0, hi=1e6)
+    damping_n_s_per_m: float = param(60.0, lo=0.0, hi=1e4)
+    friction: float = param(0.4, lo=0.0, hi=2.0)
+
+
+@dataclasses.dataclass
+class ObjectConfig:
+    """An inspection object on the wall at (u right, v up) in the wall surface frame, metres."""
+
+    cls: str = param('bolt_plate', choices=OBJECT_CLASSES)
+    u_m: float = param(0.0, lo=-25.0, hi=25.0)
+    v_m: float = param(1.5, lo=0.0, hi=20.0)
+    target: bool = param(False)
+
+
+@dataclasses.dataclass
+class WindConfig:
+    """Mean wind (map, m/s) and gusts: Ornstein-Uhlenbeck per axis with std and time constant."""
+
+    mean_m_s: list = param([0.0, 0.0, 0.0], lo=-20.0, hi=20.0, length=3)
+    gust_std_m_s: float = param(0.0, lo=0.0, hi=10.0)
+    gust_tau_s: float = param(1.5, lo=0.05, hi=60.0)
+    drag_n_s2_per_m2: float = param(0.04, lo=0.0, hi=5.0)  # quadratic drag 0.5 rho Cd A
+
+
+@dataclasses.dataclass
+class NoiseConfig:
+    """Sensor noise standard deviations (0 = perfect)."""
+
+    imu_gyro_rad_s: float = param(0.0, lo=0.0, hi=1.0)
+    imu_accel_m_s2: float = param(0.0, lo=0.0, hi=10.0)
+    odom_pos_m: float = param(0.0, lo=0.0, hi=0.5)
+    odom_att_rad: float = param(0.0, lo=0.0, hi=0.2)
+    odom_vel_m_s: float = param(0.0, lo=0.0, hi=1.0)
+    ft_force_n: float = param(0.0, lo=0.0, hi=5.0)
+    ft_torque_nm: float = param(0.0, lo=0.0, hi=1.0)
+    depth_m: float = param(0.0, lo=0.0, hi=0.1)
+
+
+@dataclasses.dataclass
+class MismatchConfig:
+    """How the simulated vehicle differs from the nominal model the controller uses."""
+
+    mass_scale: float = param(1.0, lo=0.5, hi=2.0)
+    inertia_scale: float = param(1.0, lo=0.5, hi=2.0)
+
+
+@dataclasses.dataclass
+class Scenario:
+    """One world: wall, objects, wind, noise, mismatch, start pose, seed."""
+
+    seed: int = param(0, lo=0, hi=2**31 - 1)
+    start_xyz_m: list = param([0.0, 0.0, 0.0], lo=-50.0, hi=50.0, length=3)
+    start_yaw_deg: float = param(0.0, lo=-180.0, hi=180.0)
+    wall: WallConfig = nested(WallConfig)
+    objects: list = param([], items=ObjectConfig)
+    wind: WindConfig = nested(WindConfig)
+    noise: NoiseConfig = nested(NoiseConfig)
+    mismatch: MismatchConfig = nested(MismatchConfig)
+    texture_seed: int = param(-1, lo=-1, hi=2**31 - 1)  # -1: same as seed
+
+
+def load_scenario(path=None):
+    """Load and validate a scenario YAML (empty path: the default scenario)."""
+    return check_scenario(load_yaml(Scenario, path or DEFAULT_SCENARIO))
+
+
+def check_scenario(scenario):
+    """Checks across fields: at most one target object. Returns the scenario."""
+    targets = sum(o.target for o in scenario.objects)
+    if targets > 1:
+        raise ConfigError(f"parameter 'objects' has {targets} targets; at most 1 is allowed")
+    return scenario

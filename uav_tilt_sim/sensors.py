@@ -1,0 +1,55 @@
+"""Sensor noise models (IMU, mocap-like odometry, F/T, depth), seeded by the scenario."""
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.state import VehicleState
+
+
+class SensorModel:
+    """Adds zero-mean Gaussian noise of the scenario's standard deviations."""
+
+    def __init__(self, noise, rng):
+        self.noise = noise
+        self.rng = rng
+
+    def _add(self, value, std):
+        value = np.asarray(value, dtype=float)
+        if std <= 0.0:
+            return value.copy()
+        return value + std * self.rng.standard_normal(value.shape)
+
+    def gyro(self, w_base):
+        """Angular rate in base_link."""
+        return self._add(w_base, self.noise.imu_gyro_rad_s)
+
+    def accel(self, specific_force_base):
+        """Specific force in base_link."""
+        return self._add(specific_force_base, self.noise.imu_accel_m_s2)
+
+    def force(self, force):
+        """F/T force."""
+        return self._add(force, self.noise.ft_force_n)
+
+    def torque(self, torque):
+        """F/T torque."""
+        return self._add(torque, self.noise.ft_torque_nm)
+
+    def odometry(self, truth):
+        """Mocap-like pose and velocity of base_link."""
+        q = truth.q_map_base
+        if self.noise.odom_att_rad > 0.0:
+            delta = Rotation.from_rotvec(self._add(np.zeros(3), self.noise.odom_att_rad))
+            q = (Rotation.from_quat(q) * delta).as_quat()
+        return VehicleState(truth.t_s, self._add(truth.p_map, self.noise.odom_pos_m),
+                            np.asarray(q, dtype=float),
+                            self._add(truth.v_map, self.noise.odom_vel_m_s),
+                            self.gyro(truth.w_base))
+
+    def depth(self, depth_m):
+        """Metric depth image with noise growing with range squared (stereo-like)."""
+        std = self.noise.depth_m
+        if std <= 0.0:
+            return depth_m
+        noisy = depth_m + (std * depth_m ** 2 * self.rng.standard_normal(depth_m.shape)
+                           ).astype(np.float32)
+        return np.where(np.isfinite(depth_m), noisy, depth_m)

@@ -1,0 +1,118 @@
+"""The H quadrotor as a PyBullet multibody: hub, two tilting arms, a tool on a F/T joint.
+
+Link frames are aligned with base_link (FLU) at zero tilt. The arms turn about +y_FLU
+(DESIGN section 2). A counterweight inside the hub keeps the centre of mass at the rotor
+centroid, so equal thrusts hover without torque.
+"""
+import dataclasses
+
+import numpy as np
+import pybullet as p
+
+ARM_FRONT, ARM_REAR, TOOL = 0, 1, 2     # link indices = joint indices
+TOOL_ROOT_X_M = 0.10                    # where the tool rod leaves the hub
+HUB_HALF_EXTENTS_M = (0.08, 0.07, 0.05)
+HUB_CENTRE_Z_M = -0.03                  # hub hangs below the arms; its bottom is the skid
+PROP_RADIUS_M = 0.09
+
+
+@dataclasses.dataclass
+class BodyIds:
+    """PyBullet handles of the vehicle."""
+
+    body: int
+    base_com_offset_m: np.ndarray   # base inertial frame in base_link (counterweight)
+    bottom_z_m: float               # lowest point below base_link origin
+
+
+def _rod_inertia(mass, length, axis):
+    """Principal inertia (3,) of a thin rod of ``length`` along ``axis`` (0=x, 1=y, 2=z)."""
+    inertia = np.full(3, mass * length ** 2 / 12.0)
+    inertia[axis] = 1e-6
+    return inertia
+
+
+def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia_scale=1.0):
+    """Create the vehicle in ``client``; returns :class:`BodyIds`.
+
+    ``vehicle`` is a VehicleParams; mass/inertia scales model a plant that differs from it.
+    """
+    mass = vehicle.mass_kg * mass_scale
+    m_arm = vehicle.arm_mass_kg * mass_scale
+    m_tool = vehicle.tool_mass_kg * mass_scale
+    m_hub = mass - 2 * m_arm - m_tool
+    if m_hub <= 0.1 * mass:
+        raise ValueError('arm and tool masses leave too little mass for the hub')
+    tool_len = vehicle.tool_tip_x_m - TOOL_ROOT_X_M
+    tool_com_x = TOOL_ROOT_X_M + tool_len / 2.0
+    # Counterweight: the hub's centre of mass sits behind so the whole CoM is at the origin.
+    hub_com = np.array([-m_tool * tool_com_x / m_hub, 0.0, 0.0])
+
+    inertia_total = np.asarray(vehicle.inertia_kgm2) * inertia_scale
+    arm_inertia = _rod_inertia(m_arm, 2 * vehicle.l1_m, 1)
+    tool_inertia = _rod_inertia(m_tool, tool_len, 0)
+    parallel = np.array([0.0, 1.0, 1.0])
+    others = (2 * (arm_inertia + m_arm * vehicle.l2_m ** 2 * parallel)
+              + tool_inertia + m_tool * tool_com_x ** 2 * parallel
+              + m_hub * hub_com[0] ** 2 * parallel)
+    hub_inertia = np.maximum(inertia_total - others, 0.1 * inertia_total)
+
+    hub_col = p.createCollisionShape(
+        p.GEOM_BOX, halfExtents=HUB_HALF_EXTENTS_M,
+        collisionFramePosition=[0, 0, HUB_CENTRE_Z_M], physicsClientId=client)
+    hub_vis = p.createVisualShape(
+        p.GEOM_BOX, halfExtents=HUB_HALF_EXTENTS_M, rgbaColor=[0.15, 0.15, 0.18, 1],
+        visualFramePosition=[0, 0, HUB_CENTRE_Z_M], physicsClientId=client)
+    arm_vis = _arm_visual(client, vehicle.l1_m)
+    # ee_link is the front of the spherical tip, tool_tip_x_m ahead of base_link.
+    tip_centre_x = tool_len / 2.0 - vehicle.tool_tip_radius_m
+    tool_col = p.createCollisionShape(
+        p.GEOM_SPHERE, radius=vehicle.tool_tip_radius_m,
+        collisionFramePosition=[tip_centre_x, 0, 0], physicsClientId=client)
+    tool_vis = p.createVisualShapeArray(
+        shapeTypes=[p.GEOM_CYLINDER, p.GEOM_SPHERE],
+        radii=[0.006, vehicle.tool_tip_radius_m], lengths=[tool_len, 0.0],
+        rgbaColors=[[0.7, 0.7, 0.72, 1], [0.9, 0.3, 0.1, 1]],
+        visualFramePositions=[[0, 0, 0], [tip_centre_x, 0, 0]],
+        visualFrameOrientations=[p.getQuaternionFromEuler([0, np.pi / 2, 0]), [0, 0, 0, 1]],
+        physicsClientId=client)
+
+    body = p.createMultiBody(
+        baseMass=m_hub, baseCollisionShapeIndex=hub_col, baseVisualShapeIndex=hub_vis,
+        basePosition=position_m, baseOrientation=p.getQuaternionFromEuler([0, 0, yaw_rad]),
+        baseInertialFramePosition=hub_com.tolist(),
+        linkMasses=[m_arm, m_arm, m_tool],
+        linkCollisionShapeIndices=[-1, -1, tool_col],
+        linkVisualShapeIndices=[arm_vis, arm_vis, tool_vis],
+        linkPositions=[[vehicle.l2_m, 0, 0], [-vehicle.l2_m, 0, 0], [tool_com_x, 0, 0]],
+        linkOrientations=[[0, 0, 0, 1]] * 3,
+        linkInertialFramePositions=[[0, 0, 0]] * 3,
+        linkInertialFrameOrientations=[[0, 0, 0, 1]] * 3,
+        linkParentIndices=[0, 0, 0],
+        linkJointTypes=[p.JOINT_REVOLUTE, p.JOINT_REVOLUTE, p.JOINT_FIXED],
+        linkJointAxis=[[0, 1, 0], [0, 1, 0], [0, 0, 0]],
+        physicsClientId=client)
+    p.changeDynamics(body, -1, localInertiaDiagonal=hub_inertia.tolist(),
+                     linearDamping=0.0, angularDamping=0.0, physicsClientId=client)
+    for link, inertia in ((ARM_FRONT, arm_inertia), (ARM_REAR, arm_inertia),
+                          (TOOL, tool_inertia)):
+        # (linear/angular damping are base-only: passing them here redirects the call)
+        p.changeDynamics(body, link, localInertiaDiagonal=inertia.tolist(),
+                         physicsClientId=client)
+    for joint in (ARM_FRONT, ARM_REAR):
+        # createMultiBody leaves the joint speed limit at 0, which freezes position motors.
+        p.changeDynamics(body, joint, maxJointVelocity=50.0, physicsClientId=client)
+    bottom = -(HUB_HALF_EXTENTS_M[2] - HUB_CENTRE_Z_M)
+    return BodyIds(body, hub_com, bottom)
+
+
+def _arm_visual(client, l1_m):
+    """An arm rod along y with a propeller disc at each end."""
+    along_y = p.getQuaternionFromEuler([np.pi / 2, 0, 0])
+    return p.createVisualShapeArray(
+        shapeTypes=[p.GEOM_CYLINDER, p.GEOM_CYLINDER, p.GEOM_CYLINDER],
+        radii=[0.008, PROP_RADIUS_M, PROP_RADIUS_M], lengths=[2 * l1_m, 0.004, 0.004],
+        rgbaColors=[[0.2, 0.2, 0.2, 1], [0.3, 0.3, 0.35, 0.6], [0.3, 0.3, 0.35, 0.6]],
+        visualFramePositions=[[0, 0, 0], [0, l1_m, 0.02], [0, -l1_m, 0.02]],
+        visualFrameOrientations=[along_y, [0, 0, 0, 1], [0, 0, 0, 1]],
+        physicsClientId=client)

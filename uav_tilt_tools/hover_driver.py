@@ -1,0 +1,104 @@
+"""A trivial lockstep client: answers every IMU tick with hover thrust, checks sensor sets.
+
+Used by the plant's ROS tests and by ``uav-tilt bench sim`` as the controller in another
+process. Writes a JSON report after ``--ticks`` answered ticks.
+"""
+import argparse
+import json
+import os
+import time
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from sensor_msgs.msg import Imu, JointState
+
+from uav_tilt_common import names, ros_msgs, ros_qos
+from uav_tilt_common.vehicle import VehicleParams
+
+
+class HoverDriver(Node):
+    """Answers each IMU message with a hover command stamped like it."""
+
+    def __init__(self, ticks):
+        super().__init__('hover_driver')
+        self.ticks = ticks
+        self.thrust_n = VehicleParams().hover_thrust_n
+        q = ros_qos.CONTROL
+        self.latest = {}
+        for topic, msg_type in ((names.ODOM, Odometry), (names.EE_WRENCH, WrenchStamped),
+                                (names.ACTUATORS_STATE, JointState)):
+            self.create_subscription(msg_type, topic, self._remember(topic), q)
+        self.create_subscription(Imu, names.IMU, self.on_imu, q)
+        self.pub = self.create_publisher(JointState, names.ACTUATORS_CMD, q)
+        self.answered = []          # stamps (ns) of the ticks answered
+        self.complete_sets = 0      # ticks whose odom, wrench and actuator state had arrived
+        self.wall_first = None
+        self.wall_last = None
+
+    def _remember(self, topic):
+        def callback(msg):
+            self.latest[topic] = ros_msgs.stamp_ns(msg.header.stamp)
+        return callback
+
+    def on_imu(self, msg):
+        """One control tick: answer with hover thrust until ``ticks`` are done."""
+        if len(self.answered) >= self.ticks:
+            return
+        stamp = ros_msgs.stamp_ns(msg.header.stamp)
+        if self.answered and stamp == self.answered[-1]:
+            return      # the plant re-sent a tick it is still waiting on
+        if all(self.latest.get(t) == stamp for t in
+               (names.ODOM, names.EE_WRENCH, names.ACTUATORS_STATE)):
+            self.complete_sets += 1
+        self.answered.append(stamp)
+        now = time.monotonic()
+        self.wall_first = self.wall_first or now
+        self.wall_last = now
+        self.pub.publish(ros_msgs.actuator_msg(np.full(4, self.thrust_n), (0.0, 0.0),
+                                               msg.header.stamp))
+
+    def report(self):
+        """Counts, stamp ordering and the achieved real-time factor."""
+        stamps = np.array(self.answered, dtype=np.int64)
+        sim_span = (stamps[-1] - stamps[0]) * 1e-9 if len(stamps) > 1 else 0.0
+        wall_span = (self.wall_last - self.wall_first) if len(stamps) > 1 else 0.0
+        return {
+            'ticks': len(stamps),
+            'complete_sets': self.complete_sets,
+            'strictly_increasing': bool(np.all(np.diff(stamps) > 0)),
+            'first_stamp_ns': int(stamps[0]) if len(stamps) else None,
+            'last_stamp_ns': int(stamps[-1]) if len(stamps) else None,
+            'rtf': sim_span / wall_span if wall_span > 0 else None,
+        }
+
+
+def main(argv=None):
+    """Run until ``--ticks`` are answered, write the report, then exit or stay (--stay)."""
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument('--ticks', type=int, default=300)
+    parser.add_argument('--out', required=True, help='JSON report path')
+    parser.add_argument('--stay', action='store_true', help='keep running after the report')
+    args, ros_args = parser.parse_known_args(argv)
+    rclpy.init(args=['hover_driver'] + ros_args)
+    node = HoverDriver(args.ticks)
+    try:
+        while rclpy.ok() and len(node.answered) < args.ticks:
+            rclpy.spin_once(node, timeout_sec=0.5)
+        with open(args.out + '.tmp', 'w', encoding='utf-8') as stream:
+            json.dump(node.report(), stream)
+        # Renamed into place so a reader never sees half a report.
+        os.replace(args.out + '.tmp', args.out)
+        while args.stay and rclpy.ok():
+            rclpy.spin_once(node, timeout_sec=0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

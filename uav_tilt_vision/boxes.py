@@ -1,0 +1,137 @@
+"""Box geometry for the detector: letterbox, box formats, IoU, NMS and YOLO head decoding.
+
+Boxes are ``xyxy`` (x1, y1, x2, y2) in pixels unless a name says ``xywh`` (centre x,
+centre y, width, height). Functions accept numpy arrays; ``xywh_to_xyxy``,
+``xyxy_to_xywh``, ``box_iou`` and ``wh_iou`` also accept torch tensors.
+"""
+
+import cv2
+import numpy as np
+import torch
+
+PAD_VALUE = 114  # darknet/ultralytics grey: padding stays neutral for the normalised input
+
+
+def letterbox(img, size, pad_value=PAD_VALUE):
+    """Resize ``img`` (H, W, C) into ``size`` = (width, height) keeping aspect, padding evenly.
+
+    Returns ``(out, scale, (pad_x, pad_y))``; a point maps as ``p_out = p * scale + pad``.
+    """
+    h, w = img.shape[:2]
+    out_w, out_h = size
+    scale = min(out_w / w, out_h / h)
+    new_w, new_h = int(round(w * scale)), int(round(h * scale))
+    if (new_w, new_h) != (w, h):
+        img = cv2.resize(img, (new_w, new_h), interpolation=cv2.INTER_LINEAR)
+    pad_x, pad_y = (out_w - new_w) // 2, (out_h - new_h) // 2
+    out = cv2.copyMakeBorder(img, pad_y, out_h - new_h - pad_y, pad_x, out_w - new_w - pad_x,
+                             cv2.BORDER_CONSTANT, value=(pad_value,) * 3)
+    return out, scale, (pad_x, pad_y)
+
+
+def scale_boxes(boxes, scale, pad):
+    """Map xyxy boxes from original image pixels into the letterboxed image."""
+    out = np.asarray(boxes, dtype=np.float64).copy()
+    out[..., [0, 2]] = out[..., [0, 2]] * scale + pad[0]
+    out[..., [1, 3]] = out[..., [1, 3]] * scale + pad[1]
+    return out
+
+
+def unscale_boxes(boxes, scale, pad, orig_shape):
+    """Map xyxy boxes from the letterboxed image back to the original (H, W), clipped."""
+    out = np.asarray(boxes, dtype=np.float64).copy()
+    out[..., [0, 2]] = ((out[..., [0, 2]] - pad[0]) / scale).clip(0, orig_shape[1])
+    out[..., [1, 3]] = ((out[..., [1, 3]] - pad[1]) / scale).clip(0, orig_shape[0])
+    return out
+
+
+def xywh_to_xyxy(b):
+    """(cx, cy, w, h) -> (x1, y1, x2, y2); numpy or torch, any leading shape."""
+    cat = torch.stack if isinstance(b, torch.Tensor) else np.stack
+    cx, cy, w, h = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return cat([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], -1)
+
+
+def xyxy_to_xywh(b):
+    """(x1, y1, x2, y2) -> (cx, cy, w, h); numpy or torch, any leading shape."""
+    cat = torch.stack if isinstance(b, torch.Tensor) else np.stack
+    x1, y1, x2, y2 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return cat([(x1 + x2) / 2, (y1 + y2) / 2, x2 - x1, y2 - y1], -1)
+
+
+def box_iou(a, b):
+    """Pairwise IoU of xyxy boxes: (N, 4) x (M, 4) -> (N, M); numpy or torch."""
+    lib = torch if isinstance(a, torch.Tensor) else np
+    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
+    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    lt = lib.maximum(a[:, None, :2], b[None, :, :2])
+    rb = lib.minimum(a[:, None, 2:4], b[None, :, 2:4])
+    wh = (rb - lt).clip(0) if lib is np else (rb - lt).clamp(min=0)
+    inter = wh[..., 0] * wh[..., 1]
+    union = area_a[:, None] + area_b[None, :] - inter
+    return inter / (union + 1e-12)
+
+
+def wh_iou(a, b):
+    """IoU of boxes sharing a centre: (N, 2) x (M, 2) sizes -> (N, M); numpy or torch."""
+    lib = torch if isinstance(a, torch.Tensor) else np
+    inter = lib.minimum(a[:, None], b[None]).prod(-1)
+    return inter / (a.prod(-1)[:, None] + b.prod(-1)[None] - inter)
+
+
+def nms(boxes, scores, iou_thres, classes=None):
+    """Greedy non-maximum suppression; class-aware when ``classes`` is given.
+
+    Returns the kept indices in descending score order. A box is suppressed by a
+    higher-scoring kept box of the same class whose IoU with it exceeds ``iou_thres``.
+    """
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    scores = np.asarray(scores, dtype=np.float64).reshape(-1)
+    order = np.argsort(-scores, kind='stable')
+    if len(order) == 0:
+        return order
+    iou = box_iou(boxes[order], boxes[order])
+    if classes is not None:
+        cls = np.asarray(classes)[order]
+        iou = np.where(cls[:, None] == cls[None, :], iou, 0.0)
+    suppressed = np.zeros(len(order), dtype=bool)
+    for i in range(len(order)):
+        if not suppressed[i]:
+            # only later (lower-score) boxes can be suppressed by box i
+            suppressed[i + 1:] |= iou[i, i + 1:] > iou_thres
+    return order[~suppressed]
+
+
+def decode(head, anchors, stride):
+    """Decode one raw head map into boxes in input pixels.
+
+    ``head``: (B, A*(5+C), H, W) logits; ``anchors``: (A, 2) anchor sizes in input
+    pixels. Uses the bounded YOLOv4/v5 parametrisation (see ``yolo_loss``):
+    ``xy = (2*sig(t_xy) - 0.5 + cell) * stride``, ``wh = (2*sig(t_wh))**2 * anchor``.
+    Returns (B, A*H*W, 5+C): xyxy, objectness probability, class probabilities.
+    """
+    p = head_view(head, len(anchors)).sigmoid()
+    xy, wh = grid_xywh(p, anchors, stride)
+    out = torch.cat([xywh_to_xyxy(torch.cat([xy, wh], -1)), p[..., 4:]], -1)
+    return out.reshape(out.shape[0], -1, out.shape[-1])
+
+
+def head_view(head, num_anchors):
+    """Reshape (B, A*(5+C), H, W) -> (B, A, H, W, 5+C) without copying data when possible."""
+    b, ch, h, w = head.shape
+    return head.view(b, num_anchors, ch // num_anchors, h, w).permute(0, 1, 3, 4, 2)
+
+
+def grid_xywh(p, anchors, stride):
+    """Box centres and sizes (input pixels) from sigmoid outputs ``p`` of shape (B, A, H, W, K)."""
+    h, w = p.shape[2:4]
+    gy, gx = torch.meshgrid(torch.arange(h, device=p.device, dtype=p.dtype),
+                            torch.arange(w, device=p.device, dtype=p.dtype), indexing='ij')
+    grid = torch.stack([gx, gy], -1)
+    anchors = torch.as_tensor(anchors, device=p.device, dtype=p.dtype).view(1, -1, 1, 1, 2)
+    return cell_xywh(p, grid, anchors, stride)
+
+
+def cell_xywh(p, cell, anchors, stride):
+    """The decode formula: centre and size (input pixels) from sigmoid outputs, cells, anchors."""
+    return (p[..., :2] * 2 - 0.5 + cell) * stride, (p[..., 2:4] * 2) ** 2 * anchors

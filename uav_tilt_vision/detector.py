@@ -1,0 +1,159 @@
+"""YOLOv3-tiny family detector (PyTorch) with explicit per-conv channel counts.
+
+Architecture (darknet ``yolov3-tiny.cfg``): eleven conv-BN-leaky(0.1) layers
+``c0..c10`` and two 1x1 detection heads::
+
+    c0..c4 3x3, each followed by maxpool/2  (c4's output is also the route to scale 2)
+    c5 3x3, maxpool 2x2 stride 1 (zero-pad right/bottom), c6 3x3
+    c7 1x1 -> c8 3x3 -> head0 (stride 32)
+    c7 -> c9 1x1 -> upsample x2 -> concat(c4) -> c10 3x3 -> head1 (stride 16)
+
+The reference channel list is 16-32-64-128-256-512-1024-256-512-128-256;
+``width_mult`` scales it, and ``channels`` gives every conv explicitly so that a
+structurally pruned model (irregular counts) can be rebuilt by ``load_model``.
+
+Input size: the 320x240 camera image is letterboxed to 320x256 (8 px grey bands
+top and bottom, scale 1): both dimensions must be multiples of the largest
+stride 32, and 256 is the smallest such height that keeps the full image
+unscaled. Grids are 10x8 (stride 32) and 20x16 (stride 16).
+"""
+
+import numpy as np
+import torch
+from torch import nn
+
+from uav_tilt_vision.boxes import decode, letterbox, nms, unscale_boxes
+
+REF_CHANNELS = (16, 32, 64, 128, 256, 512, 1024, 256, 512, 128, 256)
+STRIDES = (32, 16)
+IMG_SIZE = (320, 256)
+# Per-scale anchors (w, h) in input pixels, [stride 32, stride 16]; sized for the small and
+# medium objects of 320-px inspection images (train.py replaces them by k-means on the labels).
+DEFAULT_ANCHORS = (((48, 40), (72, 80), (128, 112)), ((10, 12), (18, 22), (30, 32)))
+
+
+def scaled_channels(width_mult):
+    """Reference channel list times ``width_mult``, rounded to multiples of 8 (>= 8)."""
+    return [max(8, int(round(c * width_mult / 8)) * 8) for c in REF_CHANNELS]
+
+
+class ConvBNAct(nn.Sequential):
+    """Conv (no bias) -> BatchNorm -> LeakyReLU(0.1), 'same' padding."""
+
+    def __init__(self, c_in, c_out, k):
+        super().__init__(nn.Conv2d(c_in, c_out, k, 1, k // 2, bias=False),
+                         nn.BatchNorm2d(c_out), nn.LeakyReLU(0.1, inplace=True))
+
+
+class Detector(nn.Module):
+    """YOLOv3-tiny family: ``forward`` returns raw heads [(B, A*(5+C), H/32, W/32), (.., /16)]."""
+
+    def __init__(self, num_classes=80, width_mult=1.0, channels=None, anchors=DEFAULT_ANCHORS,
+                 img_size=IMG_SIZE):
+        super().__init__()
+        ch = list(channels) if channels is not None else scaled_channels(width_mult)
+        if len(ch) != len(REF_CHANNELS):
+            raise ValueError(f'channels must list {len(REF_CHANNELS)} convs, got {len(ch)}')
+        anchors = np.asarray(anchors, dtype=np.float64).reshape(len(STRIDES), -1, 2)
+        self.num_classes = int(num_classes)
+        self.width_mult = float(width_mult)
+        self.img_size = tuple(int(v) for v in img_size)
+        self.register_buffer('anchors', torch.tensor(anchors, dtype=torch.float32))
+        n_out = anchors.shape[1] * (5 + self.num_classes)
+        ins = [3] + ch[:6]
+        self.backbone = nn.ModuleList(ConvBNAct(ins[i], ch[i], 3) for i in range(7))
+        self.pool = nn.MaxPool2d(2, 2)
+        self.pool_s1 = nn.Sequential(nn.ZeroPad2d((0, 1, 0, 1)), nn.MaxPool2d(2, 1))
+        self.c7 = ConvBNAct(ch[6], ch[7], 1)
+        self.c8 = ConvBNAct(ch[7], ch[8], 3)
+        self.head0 = nn.Conv2d(ch[8], n_out, 1)
+        self.c9 = ConvBNAct(ch[7], ch[9], 1)
+        self.up = nn.Upsample(scale_factor=2, mode='nearest')
+        self.c10 = ConvBNAct(ch[9] + ch[4], ch[10], 3)
+        self.head1 = nn.Conv2d(ch[10], n_out, 1)
+        self._init_head_bias()
+
+    def _init_head_bias(self):
+        # Objectness prior ~1e-2 and class prior 1/C (focal-loss paper / YOLOv5) so the
+        # first steps are not dominated by the huge number of background cells.
+        for head in (self.head0, self.head1):
+            b = head.bias.data.view(self.anchors.shape[1], -1)
+            b[:, 4] = float(np.log(0.01 / 0.99))
+            b[:, 5:] = float(np.log(0.6 / max(self.num_classes - 0.99, 1.0)))
+
+    def channels(self):
+        """Actual output channels of c0..c10 (read from the modules, so pruning is reflected)."""
+        convs = list(self.backbone) + [self.c7, self.c8, self.c9, self.c10]
+        return [int(m[0].out_channels) for m in convs]
+
+    def config(self):
+        """Constructor arguments that rebuild this architecture (JSON-serialisable)."""
+        return {'num_classes': self.num_classes, 'width_mult': self.width_mult,
+                'channels': self.channels(), 'anchors': self.anchors.tolist(),
+                'img_size': list(self.img_size)}
+
+    def forward(self, x):
+        """Raw head logits for a (B, 3, H, W) float input in [0, 1]."""
+        for i in range(5):
+            x = self.backbone[i](x)
+            if i == 4:
+                route = x
+            x = self.pool(x)
+        x = self.backbone[6](self.pool_s1(self.backbone[5](x)))
+        x = self.c7(x)
+        out0 = self.head0(self.c8(x))
+        y = torch.cat([self.up(self.c9(x)), route], 1)
+        return [out0, self.head1(self.c10(y))]
+
+    def decode(self, heads):
+        """(B, N, 5+C) boxes xyxy in input pixels + objectness + class probabilities."""
+        return torch.cat([decode(h, a, s) for h, a, s in zip(heads, self.anchors, STRIDES)], 1)
+
+    @torch.no_grad()
+    def predict(self, images, conf_thres=0.25, iou_thres=0.45, max_det=100):
+        """Detect in uint8 RGB images (H, W, 3), a list or one image.
+
+        Returns one (N, 6) float array per image: x1, y1, x2, y2 (original image
+        pixels), score = objectness * class probability, class index.
+        """
+        if isinstance(images, np.ndarray) and images.ndim == 3:
+            images = [images]
+        boxes = [letterbox(img, self.img_size) for img in images]
+        device = self.anchors.device
+        x = torch.from_numpy(np.stack([b[0] for b in boxes])).to(device)
+        x = x.permute(0, 3, 1, 2).float() / 255.0
+        was_training = self.training
+        self.eval()
+        dets = self.decode(self(x)).float().cpu().numpy()
+        self.train(was_training)
+        return [postprocess(d, conf_thres, iou_thres, max_det, s, p, img.shape)
+                for d, (_, s, p), img in zip(dets, boxes, images)]
+
+
+def postprocess(det, conf_thres, iou_thres, max_det, scale, pad, orig_shape):
+    """Score filter, class-aware NMS and mapping back to the original image for one image."""
+    cls = det[:, 5:].argmax(1)
+    score = det[:, 4] * det[np.arange(len(det)), 5 + cls]
+    keep = score > conf_thres
+    xyxy, score, cls = det[keep, :4], score[keep], cls[keep]
+    idx = nms(xyxy, score, iou_thres, cls)[:max_det]
+    xyxy = unscale_boxes(xyxy[idx], scale, pad, orig_shape)
+    return np.concatenate([xyxy, score[idx, None], cls[idx, None]], 1).astype(np.float32)
+
+
+def save_model(path, model, meta=None):
+    """Save architecture config, weights and a JSON-like ``meta`` dict to ``path``."""
+    torch.save({'config': model.config(), 'state_dict': model.state_dict(),
+                'meta': dict(meta or {})}, path)
+
+
+def load_model(path, map_location='cpu'):
+    """Rebuild a ``Detector`` saved by ``save_model`` (pruned channel counts included).
+
+    The saved ``meta`` dict is attached as ``model.meta``; the model is in eval mode.
+    """
+    ckpt = torch.load(path, map_location=map_location, weights_only=True)
+    model = Detector(**ckpt['config'])
+    model.load_state_dict(ckpt['state_dict'])
+    model.meta = ckpt['meta']
+    return model.eval()

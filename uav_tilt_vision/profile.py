@@ -1,0 +1,89 @@
+"""Parameter and MAC shares per layer type (3x3 conv, 1x1 conv, BN, other) via forward hooks.
+
+MACs are per image (one multiply-accumulate per weight use). A conv counts
+``out_elements * c_in/groups * k_h * k_w``; an un-fused BatchNorm one MAC per output
+element (scale and shift); activations, pooling, padding and upsampling only compare
+or copy and count 0 MACs.
+"""
+
+import json
+
+import torch
+from torch import nn
+
+from uav_tilt_vision.detector import Detector
+
+TYPES = ('conv3x3', 'conv1x1', 'bn', 'other')
+
+
+def layer_type(module):
+    """Category of a leaf module."""
+    if isinstance(module, nn.Conv2d) and module.kernel_size in ((3, 3), (1, 1)):
+        return f'conv{module.kernel_size[0]}x{module.kernel_size[1]}'
+    if isinstance(module, nn.modules.batchnorm._BatchNorm):
+        return 'bn'
+    return 'other'
+
+
+def layer_macs(module, out):
+    """MACs of one call of a leaf module for a single image, given its output."""
+    per_image = out.numel() // out.shape[0]
+    if isinstance(module, nn.Conv2d):
+        k = module.kernel_size[0] * module.kernel_size[1]
+        return per_image * module.in_channels // module.groups * k
+    if isinstance(module, nn.modules.batchnorm._BatchNorm):
+        return per_image
+    return 0
+
+
+def profile_model(model, input_shape):
+    """Profile ``model`` on a zero input of ``input_shape`` (B, C, H, W).
+
+    Returns {'params', 'macs', 'by_type': {type: {'params', 'macs', 'params_share',
+    'macs_share'}}, 'layers': [{'name', 'type', 'params', 'macs'}]}.
+    """
+    layers, handles = [], []
+
+    def hook(name):
+        def record(module, _inputs, out):
+            layers.append({'name': name, 'type': layer_type(module),
+                           'params': sum(p.numel() for p in module.parameters(recurse=False)),
+                           'macs': layer_macs(module, out)})
+        return record
+
+    for name, module in model.named_modules():
+        if not list(module.children()):
+            handles.append(module.register_forward_hook(hook(name)))
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            model(torch.zeros(input_shape, device=next(model.parameters()).device))
+    finally:
+        for h in handles:
+            h.remove()
+        model.train(was_training)
+    total_p = sum(r['params'] for r in layers)
+    total_m = sum(r['macs'] for r in layers)
+    by_type = {}
+    for t in TYPES:
+        p = sum(r['params'] for r in layers if r['type'] == t)
+        m = sum(r['macs'] for r in layers if r['type'] == t)
+        by_type[t] = {'params': p, 'macs': m, 'params_share': p / max(total_p, 1),
+                      'macs_share': m / max(total_m, 1)}
+    return {'params': total_p, 'macs': total_m, 'by_type': by_type, 'layers': layers}
+
+
+def main():
+    """Print the summary for the reference YOLOv3-tiny and the deployed width at 320x256."""
+    shape = (1, 3, 256, 320)
+    report = {}
+    for label, model in (('yolov3_tiny_ref_80cls', Detector(80, 1.0)),
+                         ('deployed_w0.25_3cls', Detector(3, 0.25))):
+        prof = profile_model(model, shape)
+        report[label] = {k: prof[k] for k in ('params', 'macs', 'by_type')}
+    print(json.dumps(report, indent=2))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,158 @@
+"""Detector training and evaluation on a YOLO-format data set (see ``yolo_data``).
+
+``train`` is reproducible from its seed on a given device: seeded initialisation,
+seeded loader order and augmentation drawn from (seed, epoch, index).
+"""
+
+import argparse
+import json
+import random
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from uav_tilt_vision.detector import DEFAULT_ANCHORS, IMG_SIZE, Detector, save_model
+from uav_tilt_vision.metrics import mean_ap
+from uav_tilt_vision.yolo_data import YoloDataset, collate, kmeans_anchors, read_meta
+from uav_tilt_vision.yolo_loss import YoloLoss
+
+
+def progress(iterable, **kwargs):
+    """tqdm progress bar when tqdm is installed, else the plain iterable."""
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return iterable
+    return tqdm(iterable, **kwargs)
+
+
+def resolve_device(device='auto'):
+    """'auto' -> CUDA when available, else CPU."""
+    if device == 'auto':
+        device = 'cuda' if torch.cuda.is_available() else 'cpu'
+    return torch.device(device)
+
+
+def git_commit():
+    """HEAD commit of the repository holding this file, or None."""
+    try:
+        res = subprocess.run(['git', 'rev-parse', 'HEAD'], cwd=Path(__file__).parent,
+                             capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return res.stdout.strip() if res.returncode == 0 else None
+
+
+def card_path(weights_path):
+    """Model card JSON path beside the weights (same stem, .json)."""
+    return Path(weights_path).with_suffix('.json')
+
+
+def num_classes_of(dataset, meta):
+    """Class count from meta.json 'classes', else the largest label + 1."""
+    if meta.get('classes'):
+        return len(meta['classes'])
+    labels = np.concatenate([dataset.labels(i)[:, 0] for i in range(len(dataset))])
+    return int(labels.max()) + 1 if len(labels) else 1
+
+
+def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_SIZE, batch=16,
+          device='auto', lr=3e-3, weight_decay=5e-4, augment=True, hflip=False, anchors=None,
+          eval_dir=None, workers=0, log=print):
+    """Train a ``Detector`` and write weights (``save_model``) plus a model card JSON beside them.
+
+    ``anchors`` None = k-means on the training labels (defaults when too few boxes).
+    ``eval_dir``: optional YOLO-format set evaluated at the end (metrics go in the card).
+    Returns the model card dict.
+    """
+    torch.manual_seed(seed)
+    np.random.seed(seed)
+    random.seed(seed)
+    dev = resolve_device(device)
+    torch.backends.cudnn.benchmark = False
+    ds = YoloDataset(data_dir, img_size, augment=augment, hflip=hflip, seed=seed)
+    meta = read_meta(data_dir)
+    n_cls = num_classes_of(ds, meta)
+    if anchors is None:
+        try:
+            anchors = kmeans_anchors(ds.label_wh())
+        except ValueError:
+            anchors = DEFAULT_ANCHORS
+    model = Detector(n_cls, width_mult, anchors=anchors, img_size=img_size).to(dev)
+    loss_fn = YoloLoss(model.anchors).to(dev)
+    loader = torch.utils.data.DataLoader(
+        ds, batch_size=batch, shuffle=True, collate_fn=collate, num_workers=workers,
+        generator=torch.Generator().manual_seed(seed), pin_memory=dev.type == 'cuda')
+    # no weight decay on BN parameters and biases (1-D tensors)
+    params = list(model.parameters())
+    opt = torch.optim.AdamW([{'params': [p for p in params if p.ndim > 1]},
+                             {'params': [p for p in params if p.ndim <= 1], 'weight_decay': 0}],
+                            lr=lr, weight_decay=weight_decay)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=epochs * len(loader),
+                                                pct_start=0.15)
+    history = []
+    model.train()
+    for epoch in progress(range(epochs), desc='train', unit='epoch'):
+        ds.set_epoch(epoch)
+        total, parts = 0.0, {'box': 0.0, 'obj': 0.0, 'cls': 0.0}
+        for images, targets in loader:
+            loss, comp = loss_fn(model(images.to(dev, non_blocking=True)), targets)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += loss.item()
+            parts = {k: parts[k] + comp[k] for k in parts}
+        history.append(total / len(loader))
+        log(f'epoch {epoch + 1}/{epochs} loss {history[-1]:.4f} '
+            + ' '.join(f'{k} {v / len(loader):.4f}' for k, v in parts.items()))
+    model.eval()
+    card = {'data_dir': str(data_dir), 'data_seed': meta.get('seed'),
+            'classes': meta.get('classes'), 'num_classes': n_cls, 'epochs': epochs,
+            'seed': seed, 'width_mult': width_mult, 'img_size': list(img_size), 'batch': batch,
+            'lr': lr, 'device': str(dev), 'anchors': model.anchors.tolist(),
+            'channels': model.channels(), 'params': sum(p.numel() for p in params),
+            'final_loss': history[-1] if history else None, 'loss_history': history,
+            'metrics': evaluate(model, eval_dir) if eval_dir else None,
+            'git_commit': git_commit()}
+    Path(out_path).parent.mkdir(parents=True, exist_ok=True)
+    save_model(out_path, model, card)
+    card_path(out_path).write_text(json.dumps(card, indent=2))
+    return card
+
+
+def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
+    """COCO-style mAP of ``model`` on a YOLO-format set: {'map50', 'map50_95', 'backend'}."""
+    ds = YoloDataset(data_dir, model.img_size)
+    preds, gts = [], []
+    for start in progress(range(0, len(ds), batch), desc='eval', unit='batch'):
+        images = [ds.read_rgb(i) for i in range(start, min(start + batch, len(ds)))]
+        preds.extend(model.predict(images, conf_thres, iou_thres))
+        gts.extend(ds.ground_truth(start + k, img.shape) for k, img in enumerate(images))
+    return mean_ap(preds, gts)
+
+
+def main(argv=None):
+    """``python -m uav_tilt_vision.train DATA OUT [--epochs N ...]``; prints the model card."""
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument('data_dir')
+    ap.add_argument('out_path')
+    ap.add_argument('--epochs', type=int, default=50)
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--width-mult', type=float, default=0.25)
+    ap.add_argument('--batch', type=int, default=16)
+    ap.add_argument('--lr', type=float, default=3e-3)
+    ap.add_argument('--device', default='auto')
+    ap.add_argument('--hflip', action='store_true', help='only for mirror-symmetric classes')
+    ap.add_argument('--eval-dir')
+    ap.add_argument('--workers', type=int, default=0)
+    a = ap.parse_args(argv)
+    card = train(a.data_dir, a.out_path, a.epochs, a.seed, a.width_mult, batch=a.batch,
+                 device=a.device, lr=a.lr, hflip=a.hflip, eval_dir=a.eval_dir, workers=a.workers)
+    print(json.dumps({k: v for k, v in card.items() if k != 'loss_history'}, indent=2))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,147 @@
+"""YOLO-format data set reader, light augmentation, collate and k-means anchors.
+
+Layout: ``DIR/images/<name>.png`` and ``DIR/labels/<name>.txt`` with one
+``class cx cy w h`` line per object (normalised to the image size); an optional
+``DIR/meta.json`` may give ``seed`` and ``classes`` (list of names).
+"""
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from uav_tilt_vision.boxes import letterbox, wh_iou, xywh_to_xyxy
+from uav_tilt_vision.detector import IMG_SIZE
+
+IMG_EXTS = ('.png', '.jpg', '.jpeg', '.bmp')
+
+
+def read_meta(root):
+    """``DIR/meta.json`` as a dict ({} when absent)."""
+    path = Path(root) / 'meta.json'
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def read_labels(path):
+    """(n, 5) float array [class, cx, cy, w, h] (normalised) from a label file; missing = empty."""
+    path = Path(path)
+    text = path.read_text().strip() if path.is_file() else ''
+    if not text:
+        return np.zeros((0, 5))
+    return np.array([line.split() for line in text.splitlines()], dtype=np.float64).reshape(-1, 5)
+
+
+def hsv_jitter(img, gains, rng):
+    """Random hue/saturation/value gains (fractions, YOLOv5 style) on a uint8 RGB image."""
+    r = rng.uniform(-1, 1, 3) * np.asarray(gains) + 1
+    hue, sat, val = cv2.split(cv2.cvtColor(img, cv2.COLOR_RGB2HSV))
+    x = np.arange(256, dtype=np.float64)
+    luts = [((x * r[0]) % 180).astype(np.uint8), np.clip(x * r[1], 0, 255).astype(np.uint8),
+            np.clip(x * r[2], 0, 255).astype(np.uint8)]
+    hsv = cv2.merge([cv2.LUT(c, lut) for c, lut in zip((hue, sat, val), luts)])
+    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+
+
+class YoloDataset(torch.utils.data.Dataset):
+    """Letterboxed images and targets in input pixels.
+
+    Items are ``(image (3, H, W) float in [0, 1], targets (n, 6))`` with targets
+    ``[0, class, cx, cy, w, h]``; ``collate`` fills column 0 with the batch index.
+    Augmentation draws from an RNG seeded by (seed, epoch, index), so results do not
+    depend on worker processes. Enable ``hflip`` only for mirror-symmetric classes.
+    """
+
+    def __init__(self, root, img_size=IMG_SIZE, augment=False, hflip=False,
+                 hsv=(0.015, 0.5, 0.3), seed=0):
+        self.root = Path(root)
+        self.images = sorted(p for p in (self.root / 'images').iterdir()
+                             if p.suffix.lower() in IMG_EXTS)
+        if not self.images:
+            raise FileNotFoundError(f'no images in {self.root / "images"}')
+        self.img_size = tuple(img_size)
+        self.augment, self.hflip, self.hsv = augment, hflip, hsv
+        self.seed, self.epoch = seed, 0
+
+    def __len__(self):
+        return len(self.images)
+
+    def set_epoch(self, epoch):
+        """Select the augmentation draw for this epoch."""
+        self.epoch = epoch
+
+    def read_rgb(self, i):
+        """Original image i as uint8 RGB."""
+        return cv2.cvtColor(cv2.imread(str(self.images[i]), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+
+    def labels(self, i):
+        """Normalised labels of image i, (n, 5) [class, cx, cy, w, h]."""
+        return read_labels(self.root / 'labels' / (self.images[i].stem + '.txt'))
+
+    def ground_truth(self, i, shape):
+        """(n, 5) [x1, y1, x2, y2, class] in pixels of image i, whose (H, W, ...) is ``shape``."""
+        h, w = shape[:2]
+        lab = self.labels(i)
+        xyxy = xywh_to_xyxy(lab[:, 1:] * [w, h, w, h])
+        return np.concatenate([xyxy, lab[:, :1]], 1)
+
+    def load(self, i):
+        """Letterboxed uint8 RGB image and (n, 5) [class, cx, cy, w, h] in input pixels."""
+        img = self.read_rgb(i)
+        h, w = img.shape[:2]
+        out, scale, pad = letterbox(img, self.img_size)
+        lab = self.labels(i)
+        boxes = lab[:, 1:] * [w, h, w, h] * scale + [pad[0], pad[1], 0, 0]
+        return out, np.concatenate([lab[:, :1], boxes], 1)
+
+    def __getitem__(self, i):
+        img, lab = self.load(i)
+        if self.augment:
+            rng = np.random.default_rng([self.seed, self.epoch, i])
+            if any(self.hsv):  # the uint8 HSV round trip is lossy: skip it when disabled
+                img = hsv_jitter(img, self.hsv, rng)
+            if self.hflip and rng.random() < 0.5:
+                img = np.ascontiguousarray(img[:, ::-1])
+                lab[:, 1] = img.shape[1] - lab[:, 1]
+        x = torch.from_numpy(img).permute(2, 0, 1).float() / 255.0
+        t = torch.zeros((len(lab), 6))
+        t[:, 1:] = torch.from_numpy(lab)
+        return x, t
+
+    def label_wh(self):
+        """All label sizes (n, 2) in input pixels (for anchor clustering)."""
+        return np.concatenate([self.load(i)[1][:, 3:5] for i in range(len(self))], 0)
+
+
+def collate(batch):
+    """Stack images; concatenate targets with column 0 = index in the batch."""
+    images, targets = zip(*batch)
+    for k, t in enumerate(targets):
+        t[:, 0] = k
+    return torch.stack(images), torch.cat(targets, 0)
+
+
+def kmeans_anchors(wh, num_scales=2, per_scale=3, iters=300):
+    """Cluster box sizes with the 1 - IoU distance (YOLOv2) into detector-ordered anchors.
+
+    Returns (num_scales, per_scale, 2) sorted so that scale 0 holds the largest
+    anchors (it is the stride-32 head) and each scale is ordered by area.
+    """
+    wh = np.asarray(wh, dtype=np.float64).reshape(-1, 2)
+    k = num_scales * per_scale
+    distinct = np.unique(wh, axis=0)
+    if len(distinct) < k:
+        raise ValueError(f'need at least {k} distinct box sizes, got {len(distinct)}')
+    # deterministic start at area quantiles: one centre per size band, no seed needed
+    distinct = distinct[np.argsort(distinct.prod(1), kind='stable')]
+    centres = distinct[((np.arange(k) + 0.5) * len(distinct) / k).astype(int)]
+    for _ in range(iters):
+        assign = wh_iou(wh, centres).argmax(1)
+        new = np.array([wh[assign == j].mean(0) if np.any(assign == j) else centres[j]
+                        for j in range(k)])
+        if np.allclose(new, centres):
+            break
+        centres = new
+    centres = centres[np.argsort(centres.prod(1))]
+    return centres.reshape(num_scales, per_scale, 2)[::-1].copy()

@@ -1,0 +1,97 @@
+"""YOLOv3 training loss: objectness BCE, class BCE and CIoU box loss.
+
+Box loss choice: 1 - CIoU on the decoded boxes (YOLOv4) rather than the original
+MSE on (tx, ty, tw, th). CIoU is scale invariant (small and large objects weigh
+the same), it also pulls centres together when boxes do not overlap, and with the
+bounded decode of ``boxes.decode`` (sigmoid for both xy and wh) its gradients stay
+bounded, so small models train quickly at a high learning rate without exp() blow-ups.
+The objectness target of a positive cell is its detached, clamped CIoU (YOLOv5), which
+makes the score reflect localisation quality, useful for NMS and mAP.
+
+Target assignment: each ground truth box goes to the grid cell holding its centre
+for every anchor (over both scales) whose shape IoU with it exceeds ``anchor_iou``,
+and always to its single best anchor, as in YOLOv3.
+"""
+
+import math
+
+import torch
+from torch import nn
+
+from uav_tilt_vision.boxes import cell_xywh, head_view, wh_iou, xywh_to_xyxy
+from uav_tilt_vision.detector import STRIDES
+
+
+def ciou(a, b, eps=1e-9):
+    """Element-wise complete IoU of (N, 4) xywh boxes ``a`` and ``b`` (Zheng et al. 2020)."""
+    a1, b1 = xywh_to_xyxy(a), xywh_to_xyxy(b)
+    inter = ((torch.minimum(a1[:, 2], b1[:, 2]) - torch.maximum(a1[:, 0], b1[:, 0])).clamp(0)
+             * (torch.minimum(a1[:, 3], b1[:, 3]) - torch.maximum(a1[:, 1], b1[:, 1])).clamp(0))
+    union = a[:, 2] * a[:, 3] + b[:, 2] * b[:, 3] - inter + eps
+    iou = inter / union
+    cw = torch.maximum(a1[:, 2], b1[:, 2]) - torch.minimum(a1[:, 0], b1[:, 0])
+    ch = torch.maximum(a1[:, 3], b1[:, 3]) - torch.minimum(a1[:, 1], b1[:, 1])
+    rho2 = ((a[:, :2] - b[:, :2]) ** 2).sum(1)
+    v = (4 / math.pi ** 2) * (torch.atan(b[:, 2] / (b[:, 3] + eps))
+                              - torch.atan(a[:, 2] / (a[:, 3] + eps))) ** 2
+    with torch.no_grad():
+        # (1 - iou) first: 1 + eps rounds to 1 in float32 and a perfect box would give 0/0
+        alpha = v / ((1 - iou) + v + eps)
+    return iou - rho2 / (cw ** 2 + ch ** 2 + eps) - alpha * v
+
+
+def assign(targets, anchors, anchor_iou):
+    """Match targets to anchors over all scales.
+
+    ``targets``: (n, 6) [image, class, cx, cy, w, h] in input pixels; ``anchors``:
+    (S, A, 2). Returns a bool (n, S, A) mask of positive (target, scale, anchor).
+    """
+    s, a = anchors.shape[:2]
+    iou = wh_iou(targets[:, 4:6], anchors.reshape(-1, 2))
+    mask = iou > anchor_iou
+    if len(targets):
+        mask[torch.arange(len(targets)), iou.argmax(1)] = True
+    return mask.view(-1, s, a)
+
+
+class YoloLoss(nn.Module):
+    """Callable ``loss(heads, targets) -> (total, {'box', 'obj', 'cls'})``."""
+
+    def __init__(self, anchors, anchor_iou=0.25, box_gain=0.05, obj_gain=1.0,
+                 cls_gain=0.5, balance=(1.0, 1.0)):
+        super().__init__()
+        self.register_buffer('anchors', torch.as_tensor(anchors, dtype=torch.float32))
+        self.anchor_iou = anchor_iou
+        self.gains = (box_gain, obj_gain, cls_gain)
+        self.balance = balance
+        self.bce = nn.BCEWithLogitsLoss()
+
+    def forward(self, heads, targets):
+        """Total weighted loss and its detached components for one batch."""
+        dev = heads[0].device
+        targets = targets.to(dev)
+        mask = assign(targets, self.anchors, self.anchor_iou)
+        l_box = l_obj = l_cls = torch.zeros((), device=dev)
+        for s, (head, stride) in enumerate(zip(heads, STRIDES)):
+            p = head_view(head, self.anchors.shape[1])
+            tobj = torch.zeros_like(p[..., 4])
+            ti, ai = mask[:, s].nonzero(as_tuple=True)
+            if len(ti):
+                t = targets[ti]
+                b = t[:, 0].long()
+                gx = (t[:, 2] / stride).long().clamp(0, p.shape[3] - 1)
+                gy = (t[:, 3] / stride).long().clamp(0, p.shape[2] - 1)
+                ps = p[b, ai, gy, gx]
+                xy, wh = cell_xywh(ps.sigmoid(), torch.stack([gx, gy], 1), self.anchors[s, ai],
+                                   stride)
+                iou = ciou(torch.cat([xy, wh], 1), t[:, 2:6])
+                l_box = l_box + (1 - iou).mean()
+                tobj[b, ai, gy, gx] = iou.detach().clamp(0).to(tobj.dtype)
+                tcls = torch.zeros_like(ps[:, 5:])
+                tcls[torch.arange(len(t)), t[:, 1].long()] = 1.0
+                l_cls = l_cls + self.bce(ps[:, 5:], tcls)
+            l_obj = l_obj + self.balance[s] * self.bce(p[..., 4], tobj)
+        gb, go, gc = self.gains
+        total = gb * l_box + go * l_obj + gc * l_cls
+        parts = {'box': l_box, 'obj': l_obj, 'cls': l_cls}
+        return total, {k: float(v.detach()) for k, v in parts.items()}
