@@ -63,7 +63,7 @@ class Flight:
             p = p - gap * normal
             v = v - (v @ normal) * normal
             if sp.contact_gains:
-                self.force_n = -gap * self.config.k_contact_z_n_per_m
+                self.force_n = -gap * self.mission.k_contact_z_n_per_m
         if p[2] < GEAR_Z_M:
             p[2], v = GEAR_Z_M, np.zeros(3)
         self.p, self.v = p, v
@@ -128,8 +128,9 @@ def test_happy_path_visits_every_mode_and_succeeds(target):
     np.testing.assert_allclose(x_flu, -target.normal_map, atol=cfg.arrive_yaw_tol_rad)
     # HOLD: desired position behind the surface by F_d / K_z, held for hold_time_s
     hold = by_mode[Mode.HOLD]
-    assert hold[-1][1].lambda_d_t[2] == pytest.approx(tip - cfg.contact_force_n
-                                                      / cfg.k_contact_z_n_per_m)
+    mission = flight.mission
+    assert hold[-1][1].lambda_d_t[2] == pytest.approx(tip - mission.contact_force_n
+                                                      / mission.k_contact_z_n_per_m)
     assert hold[-1][0] - hold[0][0] == pytest.approx(cfg.hold_time_s, abs=2 * DT_S)
     # compliant in contact, and while the retreat reference is still behind the surface
     assert all(sp.contact_gains == (mode in (Mode.CONTACT, Mode.HOLD) or (

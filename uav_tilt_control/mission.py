@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_control import frames
+from uav_tilt_control.impedance import ImpedanceConfig, contact_depth_for_force
 from uav_tilt_control.types import ImpedanceSetpoint
 
 # Shortest reference segment: bounds the accelerations of a segment that only has to
@@ -22,6 +23,7 @@ from uav_tilt_control.types import ImpedanceSetpoint
 _MIN_SEGMENT_S = 1.0
 # Peak speed of a minimum-jerk segment is 1.875 * distance / duration.
 _MIN_JERK_PEAK = 1.875
+DEFAULT_CONTACT_FORCE_N = 5.0
 
 
 class Mode(str, enum.Enum):
@@ -58,8 +60,6 @@ class MissionConfig:
     approach_speed_m_s: float = param(0.3, lo=0.05, hi=2.0)
     pitch_to_normal: bool = param(True)                     # align the tool with the normal
     max_pitch_rad: float = param(0.5, lo=0.0, hi=1.0)
-    contact_force_n: float = param(5.0, lo=0.0, hi=20.0)
-    k_contact_z_n_per_m: float = param(100.0, lo=1.0, hi=10000.0)  # impedance K_z in contact
     contact_speed_m_s: float = param(0.1, lo=0.01, hi=0.5)  # peak speed of the contact ramp
     contact_threshold_n: float = param(1.0, lo=0.05, hi=20.0)
     contact_detect_ticks: int = param(3, lo=1, hi=100)
@@ -115,9 +115,20 @@ class MinJerk:
 class Mission:
     """Inspection state machine; call :meth:`update` every control tick."""
 
-    def __init__(self, vehicle, config=None):
+    def __init__(self, vehicle, config=None, contact_force_n=DEFAULT_CONTACT_FORCE_N,
+                 k_contact_z_n_per_m=None):
+        """``k_contact_z_n_per_m``: the impedance law's contact K_z, which turns the wanted
+        push into a depth (default: that of the default ImpedanceConfig for the vehicle)."""
         self.vehicle = vehicle
         self.config = config or MissionConfig()
+        if k_contact_z_n_per_m is None:
+            k_contact_z_n_per_m = ImpedanceConfig().contact.k_c(vehicle.mass_kg)[0][2]
+        self.contact_force_n = float(contact_force_n)
+        self.k_contact_z_n_per_m = float(k_contact_z_n_per_m)
+        if not 0.0 <= self.contact_force_n < self.config.force_limit_n:
+            raise ConfigError(
+                f"parameter 'contact_force' = {contact_force_n!r} must be in "
+                f"[0, force_limit_n = {self.config.force_limit_n!r})")
         if self.config.target_lost_retreat_s <= self.config.target_lost_hold_s:
             raise ConfigError(
                 f"parameter 'target_lost_retreat_s' = {self.config.target_lost_retreat_s!r} "
@@ -299,7 +310,8 @@ class Mission:
             return
         self._track_target(target)
         self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.contact_threshold_n else 0
-        if self._contact_ticks >= cfg.contact_detect_ticks:
+        # HOLD starts once the push has reached its depth, so it holds the wanted force
+        if self._contact_ticks >= cfg.contact_detect_ticks and self._traj.done(self._now_s):
             self._enter(Mode.HOLD)
         elif self._now_s > self._traj.t0_s + self._traj.T + cfg.contact_timeout_s:
             self._failsafe('no_contact', Mode.RETREAT)
@@ -376,7 +388,7 @@ class Mission:
             self._plan_t(self._standoff_t(), cfg.approach_speed_m_s, ref_map)
         elif mode == Mode.CONTACT:
             self._contact_ticks = 0
-            depth = cfg.contact_force_n / cfg.k_contact_z_n_per_m
+            depth = contact_depth_for_force(self.contact_force_n, self.k_contact_z_n_per_m)
             self._plan_t(np.array([0.0, 0.0, self.vehicle.tool_tip_x_m - depth]),
                          cfg.contact_speed_m_s)
         elif mode == Mode.HOLD:

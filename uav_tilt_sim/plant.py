@@ -100,6 +100,8 @@ class Plant:
         self._contact_force_map = np.zeros(3)
         self._contact_torque_map = np.zeros(3)
         self.command = ActuatorCommand(np.zeros(4))
+        # Extra force [N, map] on base_link's origin while set: a test/disturbance hook.
+        self.external_force_map = np.zeros(3)
         self._truth = None
 
     @property
@@ -132,7 +134,8 @@ class Plant:
             pos, quat = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
             vel, _ = p.getBaseVelocity(self.body, physicsClientId=self.client)
             R = quat_to_matrix(quat)
-            force_map = R @ wrench_b[:3] + self._air_force(np.asarray(vel))
+            force_map = (R @ wrench_b[:3] + self._air_force(np.asarray(vel))
+                         + self.external_force_map)
             # base_link's origin is the rotor centroid; PyBullet's base frame is the hub CoM.
             origin_map = np.asarray(pos) - R @ self._com_offset
             p.applyExternalForce(self.body, -1, force_map.tolist(), origin_map.tolist(),

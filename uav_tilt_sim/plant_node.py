@@ -7,6 +7,7 @@ commands come back. In realtime, sim time follows the wall clock and late comman
 counted, never waited for.
 """
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -54,12 +55,13 @@ class PlantNode(Node):
         self.plant = Plant(self.cfg, scenario, render=self.cfg.camera_enabled)
         self.camera_every = max(1, int(round(self.cfg.control_hz / self.cfg.camera.rate_hz)))
         q = ros_qos.CONTROL
-        self.pub_clock = self.create_publisher(Clock, names.CLOCK, ros_qos.CLOCK)
-        self.pub_imu = self.create_publisher(Imu, names.IMU, q)
-        self.pub_odom = self.create_publisher(Odometry, names.ODOM, q)
-        self.pub_wrench = self.create_publisher(WrenchStamped, names.EE_WRENCH, q)
-        self.pub_act = self.create_publisher(JointState, names.ACTUATORS_STATE, q)
-        self.pub_gt_odom = self.create_publisher(Odometry, names.GROUND_TRUTH_ODOM, q)
+        quiet = functools.partial(ros_qos.quiet_publisher, self)
+        self.pub_clock = quiet(Clock, names.CLOCK, ros_qos.CLOCK)
+        self.pub_imu = quiet(Imu, names.IMU, q)
+        self.pub_odom = quiet(Odometry, names.ODOM, q)
+        self.pub_wrench = quiet(WrenchStamped, names.EE_WRENCH, q)
+        self.pub_act = quiet(JointState, names.ACTUATORS_STATE, q)
+        self.pub_gt_odom = quiet(Odometry, names.GROUND_TRUTH_ODOM, q)
         self.pub_gt_target = self.create_publisher(PoseStamped, names.GROUND_TRUTH_TARGET,
                                                    ros_qos.LATCHED)
         self.pub_rgb = self.create_publisher(Image, names.CAMERA_COLOR, ros_qos.CAMERA_PUB)
@@ -68,7 +70,7 @@ class PlantNode(Node):
                                               ros_qos.CAMERA_PUB)
         self.pub_status = self.create_publisher(DiagnosticArray, names.PLANT_STATUS,
                                                 ros_qos.STATUS)
-        self.create_subscription(JointState, names.ACTUATORS_CMD, self.on_command, q)
+        ros_qos.quiet_subscription(self, JointState, names.ACTUATORS_CMD, self.on_command, q)
 
         self.rejects = RejectCounter()
         self.stats = dict(lockstep_waits=0, lockstep_timeouts=0, late_commands=0,
@@ -88,7 +90,7 @@ class PlantNode(Node):
         self.tick_timer = self.create_timer(period, self.on_free_tick)
         if self.cfg.mode == 'lockstep':
             self.tick_timer.cancel()
-            self.create_timer(0.01, self.on_watchdog)
+            self.create_timer(0.05, self.on_watchdog)
         self.create_timer(1.0 / self.cfg.status_rate_hz, self.on_status)
         self.get_logger().info(
             f'plant up: mode={self.cfg.mode} rtf={self.cfg.rtf} '
@@ -184,8 +186,11 @@ class PlantNode(Node):
         # The controller runs on imu, so everything it reads goes out before it.
         self.pub_odom.publish(ros_msgs.odometry_msg(s.odom, stamp))
         self.pub_wrench.publish(ros_msgs.wrench_msg(s.ee_force_n, s.ee_torque_nm, stamp))
-        self.pub_act.publish(ros_msgs.actuator_msg(s.thrusts_n, s.tilts_rad, stamp))
-        self.pub_gt_odom.publish(ros_msgs.odometry_msg(self.plant.state(), stamp))
+        # Monitoring-only topics cost the 300 Hz loop nothing when nobody listens.
+        if self.pub_act.get_subscription_count():
+            self.pub_act.publish(ros_msgs.actuator_msg(s.thrusts_n, s.tilts_rad, stamp))
+        if self.pub_gt_odom.get_subscription_count():
+            self.pub_gt_odom.publish(ros_msgs.odometry_msg(self.plant.state(), stamp))
         self.pub_imu.publish(ros_msgs.imu_msg(s.gyro_rad_s, s.accel_m_s2, s.q_imu, stamp))
         self.in_contact = s.in_contact
 

@@ -28,13 +28,14 @@ class HoverDriver(Node):
         self.thrust_n = VehicleParams().hover_thrust_n
         q = ros_qos.CONTROL
         self.latest = {}
-        for topic, msg_type in ((names.ODOM, Odometry), (names.EE_WRENCH, WrenchStamped),
-                                (names.ACTUATORS_STATE, JointState)):
-            self.create_subscription(msg_type, topic, self._remember(topic), q)
-        self.create_subscription(Imu, names.IMU, self.on_imu, q)
-        self.pub = self.create_publisher(JointState, names.ACTUATORS_CMD, q)
+        self.latest_topics = (names.ODOM, names.EE_WRENCH)
+        # What a flight controller reads besides the imu.
+        for topic, msg_type in ((names.ODOM, Odometry), (names.EE_WRENCH, WrenchStamped)):
+            ros_qos.quiet_subscription(self, msg_type, topic, self._remember(topic), q)
+        ros_qos.quiet_subscription(self, Imu, names.IMU, self.on_imu, q)
+        self.pub = ros_qos.quiet_publisher(self, JointState, names.ACTUATORS_CMD, q)
         self.answered = []          # stamps (ns) of the ticks answered
-        self.complete_sets = 0      # ticks whose odom, wrench and actuator state had arrived
+        self.complete_sets = 0      # ticks whose odom and wrench had arrived before the imu
         self.wall_first = None
         self.wall_last = None
 
@@ -50,8 +51,7 @@ class HoverDriver(Node):
         stamp = ros_msgs.stamp_ns(msg.header.stamp)
         if self.answered and stamp == self.answered[-1]:
             return      # the plant re-sent a tick it is still waiting on
-        if all(self.latest.get(t) == stamp for t in
-               (names.ODOM, names.EE_WRENCH, names.ACTUATORS_STATE)):
+        if all(self.latest.get(t) == stamp for t in self.latest_topics):
             self.complete_sets += 1
         self.answered.append(stamp)
         now = time.monotonic()

@@ -1,0 +1,80 @@
+"""`uav-tilt bench sim`: real-time factors of the plant (DESIGN section 7).
+
+rtf_physics: the plant core's tick (physics substeps + sensors), no camera, no ROS.
+rtf_camera: the same with the RGB-D camera rendered at its rate (30 Hz).
+rtf_ros_lockstep: plant_node and a hover client in two processes, lockstep, no camera.
+"""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from uav_tilt_common.state import ActuatorCommand
+from uav_tilt_sim.plant import Plant, PlantCoreConfig
+from uav_tilt_sim.scenario import load_scenario
+
+
+def _hover_plant(render):
+    scenario = load_scenario()
+    scenario.start_xyz_m = [0.0, 0.0, 1.5]
+    plant = Plant(PlantCoreConfig(), scenario, render=render)
+    hover = np.full(4, plant.mass_kg * 9.80665 / 4)
+    plant.set_actuator_state(hover, 0.0, 0.0)
+    return plant, ActuatorCommand(hover)
+
+
+def core_rtf(seconds, camera):
+    """Simulated seconds per wall second of the in-process plant."""
+    plant, command = _hover_plant(render=camera)
+    every = round(plant.config.control_hz / plant.config.camera.rate_hz)
+    ticks = int(seconds * plant.config.control_hz)
+    start = time.perf_counter()
+    for tick in range(ticks):
+        plant.step(command)
+        plant.read_sensors()
+        if camera and tick % every == 0:
+            plant.render()
+    wall = time.perf_counter() - start
+    plant.close()
+    return ticks * plant.dt_tick / wall
+
+
+def ros_lockstep_rtf(ticks):
+    """Real-time factor of plant_node + hover_driver in lockstep (separate processes)."""
+    env = dict(os.environ)
+    env.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    ros_args = ['--ros-args', '-r', '__ns:=/uav']
+    with tempfile.TemporaryDirectory() as tmp:
+        report = os.path.join(tmp, 'driver.json')
+        plant = subprocess.Popen(
+            [sys.executable, '-m', 'uav_tilt_sim.plant_node', *ros_args,
+             '-p', 'camera_enabled:=false'], env=env,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            subprocess.run([sys.executable, '-m', 'uav_tilt_tools.hover_driver', '--ticks',
+                            str(ticks), '--out', report, *ros_args], env=env, check=True,
+                           timeout=600)
+            with open(report, encoding='utf-8') as stream:
+                return json.load(stream)['rtf']
+        finally:
+            plant.terminate()
+            plant.wait(timeout=10)
+
+
+def bench_sim(seconds=10.0):
+    """All three factors, plus the ROS overhead as a ratio to the core in the same run."""
+    physics = core_rtf(seconds, camera=False)
+    camera = core_rtf(seconds / 2, camera=True)
+    ros = ros_lockstep_rtf(int(seconds * 300))
+    return {
+        'rtf_physics': round(physics, 2),
+        'rtf_camera': round(camera, 2),
+        'rtf_ros_lockstep': round(ros, 2),
+        'ros_lockstep_vs_physics': round(ros / physics, 3),
+        'sim_seconds': seconds,
+    }

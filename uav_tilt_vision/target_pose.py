@@ -1,0 +1,133 @@
+"""3D point of interest and surface normal from a depth image (camera optical frame), no rclpy.
+
+Covariance model of :func:`estimate_target_pose` (6x6, order x, y, z, rot x, rot y,
+rot z; metres and rad^2, axes of the camera optical frame), by first-order propagation
+of independent errors:
+
+- plane normal: sigma^2 * sum_k e_k e_k^T / lambda_k over the two in-plane eigen-pairs of
+  the inlier scatter matrix (sigma^2 = residual variance, floored at the sensor noise);
+- plane offset at the inlier centroid: sigma^2 / N;
+- pixel position of the POI: ``pixel_sigma_px`` in u and v.
+
+The point is the ray through (u, v) cut by the plane, so its error lies along the ray
+(offset, normal tilt times the lever arm from the centroid) plus the in-plane shift of
+the pixel ray. The orientation error is the normal's tilt, n x dn; rotation about the
+normal is a convention, not a measurement, and gets ``UNOBSERVED_VAR_RAD2``.
+"""
+import dataclasses
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+UNOBSERVED_VAR_RAD2 = 1.0e3
+_MIN_POINTS = 12
+
+
+@dataclasses.dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics (pixels) of a width x height image."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+
+def deproject(u_px, v_px, depth_m, K):
+    """Camera-frame points (..., 3) of pixels (u, v) at depth z (arrays broadcast)."""
+    u, v, z = np.broadcast_arrays(np.asarray(u_px, float), np.asarray(v_px, float),
+                                  np.asarray(depth_m, float))
+    return np.stack([(u - K.cx) / K.fx * z, (v - K.cy) / K.fy * z, z], axis=-1)
+
+
+def estimate_target_pose(u_px, v_px, depth_m, K, window_px=10, pixel_sigma_px=0.5,
+                         depth_sigma_floor_m=1.0e-3, reject_rounds=2):
+    """Point ``p_cam_m``, unit normal ``n_cam`` (toward the camera) and 6x6 covariance.
+
+    A plane is fitted by SVD to the valid depth pixels (finite, > 0) in a
+    (2 window_px + 1)^2 window around (u, v), with ``reject_rounds`` rounds of
+    residual-based outlier rejection; the point is the ray through (u, v) cut by
+    that plane, so a hole at the POI itself does not matter. None without a fit.
+    """
+    h, w = depth_m.shape
+    uc, vc = int(round(u_px)), int(round(v_px))
+    x0, x1 = max(uc - window_px, 0), min(uc + window_px + 1, w)
+    y0, y1 = max(vc - window_px, 0), min(vc + window_px + 1, h)
+    if x0 >= x1 or y0 >= y1:
+        return None
+    z = depth_m[y0:y1, x0:x1].astype(float)
+    vv, uu = np.mgrid[y0:y1, x0:x1]
+    valid = np.isfinite(z) & (z > 0)
+    pts = deproject(uu[valid], vv[valid], z[valid], K)
+    fit = _robust_plane(pts, depth_sigma_floor_m, reject_rounds)
+    if fit is None:
+        return None
+    n, c, inliers, sigma2 = fit
+    d = np.array([(u_px - K.cx) / K.fx, (v_px - K.cy) / K.fy, 1.0])
+    nd = float(n @ d)
+    if nd > -1e-3:
+        return None  # ray (almost) parallel to the plane, or the plane behind the camera
+    p = d * float(n @ c) / nd
+    return p, n, _covariance(p, n, c, d, inliers, sigma2, K, pixel_sigma_px)
+
+
+def _robust_plane(pts, sigma_floor_m, rounds):
+    """(normal toward the camera, centroid, inlier points, residual variance) or None."""
+    keep = np.ones(len(pts), bool)
+    for k in range(rounds + 1):
+        if keep.sum() < _MIN_POINTS:
+            return None
+        q = pts[keep]
+        c = q.mean(axis=0)
+        _, _, vt = np.linalg.svd(q - c, full_matrices=False)
+        n = vt[2]
+        if n @ c > 0:
+            n = -n
+        if k == rounds:
+            break
+        res = (pts - c) @ n
+        # MAD scale, floored so that a perfect plane keeps its noise-free points.
+        scale = max(1.4826 * np.median(np.abs(res[keep])), sigma_floor_m)
+        keep = np.abs(res) < 3.0 * scale
+    res = (q - c) @ n
+    sigma2 = max(float(res @ res) / max(len(q) - 3, 1), sigma_floor_m ** 2)
+    return n, c, q, sigma2
+
+
+def _covariance(p, n, c, d, q, sigma2, K, pixel_sigma_px):
+    dq = q - c
+    scatter = dq.T @ dq
+    evals, evecs = np.linalg.eigh(scatter)
+    cov_n = sum(np.outer(evecs[:, i], evecs[:, i]) / max(evals[i], 1e-12) for i in (1, 2))
+    cov_n *= sigma2
+    nd = float(n @ d)
+    # p = d t with t = n.c / n.d; perturbing the plane moves p along the ray.
+    ray = d / nd
+    j_p_n = -np.outer(ray, p - c)           # dp / dn
+    j_p_off = ray[:, None]                  # dp / d(offset along n at c)
+    proj = np.eye(3) - np.outer(d, n) / nd  # keeps the shifted ray on the plane
+    t = float(n @ p) / nd
+    j_p_uv = t * proj @ np.array([[1.0 / K.fx, 0.0], [0.0, 1.0 / K.fy], [0.0, 0.0]])
+    j = np.zeros((6, 6))
+    j[:3, :3], j[:3, 3:4], j[:3, 4:] = j_p_n, j_p_off, j_p_uv
+    j[3:, :3] = np.cross(np.eye(3), n)     # d(theta) = n x dn
+    noise = np.zeros((6, 6))
+    noise[:3, :3] = cov_n
+    noise[3, 3] = sigma2 / len(q)
+    noise[4, 4] = noise[5, 5] = pixel_sigma_px ** 2
+    cov = j @ noise @ j.T
+    cov[3:, 3:] += UNOBSERVED_VAR_RAD2 * np.outer(n, n)
+    return 0.5 * (cov + cov.T)
+
+
+def pose_quaternion_from_normal(n_cam):
+    """Quaternion (x, y, z, w) of the target frame: z = n_cam, x = camera x projected on the
+    surface (camera y when nearly parallel), y = z cross x (up for a level camera)."""
+    z = np.asarray(n_cam, float)
+    z = z / np.linalg.norm(z)
+    ref = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = ref - (ref @ z) * z
+    x /= np.linalg.norm(x)
+    return Rotation.from_matrix(np.column_stack([x, np.cross(z, x), z])).as_quat()
