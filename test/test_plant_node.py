@@ -1,15 +1,19 @@
 """plant_node through ROS: lockstep with a driver in another process, timeouts, bad input."""
 import json
 import math
+import time
 
+import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from ros_graph import Probe, start, status_values, stop
 from uav_tilt_common import names, ros_msgs, ros_qos
 
 TIMEOUT_S = 0.3
+# Realtime test pace: slow enough that rendering 30 Hz keeps up on a busy 2-core machine.
+RTF = 0.5
 
 
 @pytest.fixture
@@ -84,3 +88,31 @@ def test_bad_parameter_stops_the_node_with_one_clear_line(tmp_path):
     lines = [line for line in (tmp_path / 'plant.log').read_text().splitlines()
              if 'FATAL' in line]
     assert len(lines) == 1 and "'rtf'" in lines[0] and '-2.0' in lines[0]
+
+
+def test_realtime_mode_follows_the_wall_clock_and_streams_the_camera(tmp_path, probe):
+    plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
+                  params={'mode': 'realtime', 'rtf': RTF, 'status_rate_hz': 10.0})
+    try:
+        probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
+        for topic, msg_type in ((names.CAMERA_COLOR, Image), (names.CAMERA_DEPTH, Image),
+                                (names.CAMERA_INFO, CameraInfo)):
+            probe.record(topic, msg_type, ros_qos.CAMERA_SUB)
+        assert probe.spin_until(lambda: 'sim_time_s' in latest_status(probe), 30.0)
+        wall0, sim0 = time.monotonic(), float(latest_status(probe)['sim_time_s'])
+        probe.spin_until(lambda: False, 3.0)
+        wall1, sim1 = time.monotonic(), float(latest_status(probe)['sim_time_s'])
+        # Status arrives at 10 Hz, so each reading may be up to 0.1 s old.
+        assert sim1 - sim0 == pytest.approx(RTF * (wall1 - wall0), abs=0.25)
+        rgb, depth, info = (probe.messages[t][-1] for t in
+                            (names.CAMERA_COLOR, names.CAMERA_DEPTH, names.CAMERA_INFO))
+        assert (rgb.encoding, rgb.width, rgb.height) == ('rgb8', 320, 240)
+        assert (depth.encoding, depth.width, depth.height) == ('32FC1', 320, 240)
+        assert info.k[0] == 277.0 and info.header.frame_id == names.FRAME_CAMERA
+        depth_m = ros_msgs.array_of_image(depth)
+        # The vehicle sits on the ground facing the wall 2.5 m ahead.
+        centre = depth_m[100:140, 140:180]
+        assert np.all((centre > 2.0) & (centre < 2.6))
+    finally:
+        code, _ = stop(plant)
+    assert code == 0

@@ -30,6 +30,8 @@ from uav_tilt_sim.scenario import load_scenario
 
 # Before the first command the current tick is re-sent this often (late-joining controllers).
 RESEND_PERIOD_S = 0.25
+# Free-running ticks one timer callback may step to catch up with the wall clock.
+MAX_CATCH_UP = 10
 
 
 @dataclasses.dataclass
@@ -145,14 +147,24 @@ class PlantNode(Node):
             self.waiting = False
             self.synced = False
             self._apply_failsafe()
+            self.wall_start, self.sim_start = time.monotonic(), self.plant.t_s
             self.tick_timer.reset()
 
     def on_free_tick(self):
-        """Realtime mode, or lockstep after a timeout: step with the newest command."""
+        """Realtime mode, or lockstep after a timeout: sim time follows the wall clock.
+
+        Steps as many ticks as are due (at most MAX_CATCH_UP per call), so late timer
+        callbacks on a busy machine do not slow simulated time down.
+        """
         if self.cfg.mode == 'lockstep':
             self._apply_failsafe()
-        self.plant.step()
-        self._publish_tick()
+        rate = self.cfg.rtf if self.cfg.rtf > 0 else 1.0
+        due = self.sim_start + (time.monotonic() - self.wall_start) * rate
+        for _ in range(MAX_CATCH_UP):
+            if self.plant.t_s + self.plant.dt_tick > due + 1e-9:
+                break
+            self.plant.step()
+            self._publish_tick()
 
     # --- stepping -----------------------------------------------------------------------
     def _apply_failsafe(self):

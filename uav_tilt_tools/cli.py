@@ -1,26 +1,23 @@
-"""The `uav-tilt` command line (DESIGN section 6)."""
+"""The `uav-tilt` command line (DESIGN section 6).
+
+Each sub-command lives in its own module exposing ``register(subparsers)``, which adds
+its parser and sets ``func`` (args -> exit code).
+"""
 import argparse
-import json
+import importlib
 import sys
 
-
-def _bench(args):
-    if args.what == 'sim':
-        from uav_tilt_tools.bench_sim import bench_sim
-        result = bench_sim(args.seconds)
-    print(json.dumps(result))
-    return 0
+COMMAND_MODULES = (
+    'uav_tilt_tools.bench',
+)
 
 
 def build_parser():
-    """The argument parser with every sub-command that exists."""
-    parser = argparse.ArgumentParser(prog='uav-tilt', description=__doc__)
+    """The argument parser with every sub-command."""
+    parser = argparse.ArgumentParser(prog='uav-tilt', description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='command', required=True)
-    bench = sub.add_parser('bench', help='speed measurements, one JSON object on stdout')
-    bench.add_argument('what', choices=['sim'])
-    bench.add_argument('--seconds', type=float, default=10.0,
-                       help='simulated seconds per measurement')
-    bench.set_defaults(func=_bench)
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
     return parser
 
 
