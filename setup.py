@@ -23,6 +23,10 @@ setup(
     entry_points={
         'console_scripts': [
             'plant_node = uav_tilt_sim.plant_node:main',
+            'controller_node = uav_tilt_control.controller_node:main',
+            'vision_node = uav_tilt_vision.vision_node:main',
+            'recorder_node = uav_tilt_tools.recorder_node:main',
+            'foxglove_bridge = uav_tilt_tools.foxglove_bridge:main',
             'uav-tilt = uav_tilt_tools.cli:main',
         ],
     },

@@ -128,3 +128,33 @@ def test_config_defaults_survive_loading_and_are_consistent():
     # Selective contact set: the normal z_t is more compliant than the wall axes.
     k, _ = ContactGains().k_c(MASS_KG)
     assert k[2] < k[0] and k[2] < k[1]
+
+
+def test_hover_estimator_removes_the_altitude_offset_of_a_mass_mismatch():
+    """A plant 8% heavier than the model: without the estimator the vehicle sags by
+    0.08 M g / K_z; with it the vertical error vanishes, while horizontal compliance stays."""
+    true_mass = 1.08 * MASS_KG
+    weight_error = np.array([0.0, 0.0, -(true_mass - MASS_KG) * GRAVITY])
+    f_push = np.array([1.0, 0.0, 0.0])
+
+    def final_position(tau_s):
+        cfg = dataclasses.replace(ImpedanceConfig(), hover_estimator_tau_s=tau_s)
+        controller = ImpedanceController(MASS_KG, cfg)
+        # The model's missing weight acts like an external downward force.
+        p = _simulate(controller, ImpedanceSetpoint(), weight_error + f_push, 30.0)[-1]
+        return p, controller.gains(contact=False)[0]
+
+    p_off, k = final_position(0.0)
+    assert p_off[2] == pytest.approx(weight_error[2] / k[2], rel=0.02)
+    p_on, _ = final_position(2.0)
+    assert abs(p_on[2]) < 0.01 * abs(p_off[2])
+    assert p_on[0] == pytest.approx(f_push[0] / k[0], rel=0.02)
+
+
+def test_hover_estimator_is_frozen_in_contact():
+    controller = ImpedanceController(MASS_KG, ImpedanceConfig())
+    f_ext = np.array([0.0, 0.0, -2.0])
+    z = _simulate(controller, ImpedanceSetpoint(contact_gains=True), f_ext, 20.0)[-1, 2]
+    k, _ = controller.gains(contact=True)
+    assert controller.f_hover_n == 0.0
+    assert z == pytest.approx(f_ext[2] / k[2], rel=0.02)

@@ -58,6 +58,10 @@ class ImpedanceConfig:
     contact_cutoff_hz: float = param(10.0, lo=0.1, hi=150.0)
     contact_feedforward: bool = param(False)
     accel_limit_mps2: float = param(6.0, lo=0.1, hi=50.0)
+    # Hover-thrust estimation (as PX4 does): a slow integrator on the vertical error learns
+    # the real weight, so a mass mismatch leaves no altitude offset. 0 disables it.
+    hover_estimator_tau_s: float = param(2.0, lo=0.0, hi=100.0)
+    hover_estimator_limit: float = param(0.3, lo=0.0, hi=1.0)   # fraction of nominal weight
 
 
 def contact_depth_for_force(force_n, k_z_n_m):
@@ -77,10 +81,12 @@ class ImpedanceController:
         self.mass_kg = float(mass_kg)
         self.config = config or ImpedanceConfig()
         self.f_contact_map = np.zeros(3)
+        self.f_hover_n = 0.0       # learnt weight correction, map z
 
     def reset(self):
-        """Clear the contact-force filter."""
+        """Clear the contact-force filter and the hover-thrust estimate."""
         self.f_contact_map = np.zeros(3)
+        self.f_hover_n = 0.0
 
     def gains(self, contact):
         """(K, C) diagonals of the contact or free-flight set."""
@@ -110,8 +116,23 @@ class ImpedanceController:
         norm = np.linalg.norm(accel_t)
         if norm > cfg.accel_limit_mps2:
             accel_t *= cfg.accel_limit_mps2 / norm
-        f_gravity_map = np.array([0.0, 0.0, -self.mass_kg * GRAVITY])
+        self._estimate_hover(R_map_t @ e_t, K, setpoint.contact_gains, dt_s)
+        f_gravity_map = np.array([0.0, 0.0, -self.mass_kg * GRAVITY - self.f_hover_n])
         f_p_map = -f_gravity_map + R_map_t @ (self.mass_kg * accel_t)
         if cfg.contact_feedforward:
             f_p_map -= self.f_contact_map
         return f_p_map
+
+    def _estimate_hover(self, e_map, K_t, contact, dt_s):
+        """Integrate the vertical error into the weight estimate (free flight only).
+
+        Frozen in contact, where a vertical share of the push on an inclined wall must stay
+        the spring of eq. (6); horizontal axes keep their compliance: no integrator there.
+        """
+        tau = self.config.hover_estimator_tau_s
+        if tau <= 0.0 or contact:
+            return
+        k_z = float(np.max(K_t))
+        limit = self.config.hover_estimator_limit * self.mass_kg * GRAVITY
+        self.f_hover_n = float(np.clip(self.f_hover_n - k_z / tau * e_map[2] * dt_s,
+                                       -limit, limit))

@@ -9,6 +9,9 @@ import sys
 
 COMMAND_MODULES = (
     'uav_tilt_tools.bench',
+    'uav_tilt_tools.campaign',
+    'uav_tilt_tools.report',
+    'uav_tilt_tools.topic_cli',
 )
 
 

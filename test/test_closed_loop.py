@@ -1,0 +1,169 @@
+"""ControllerCore flying the real PyBullet plant in-process (issue 3's must-shows)."""
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.optimize import curve_fit
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_control.controller_core import ControllerConfig
+from uav_tilt_control.mission import MissionConfig, Mode
+from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_tools.inprocess import Flight, run_mission
+
+SCENARIO = load_scenario()
+ALTITUDE_M = 1.5
+
+
+def _config(**mission):
+    return ControllerConfig(target_source='ground_truth', mission=MissionConfig(**mission))
+
+
+def _hovering(config=None, scenario=SCENARIO):
+    """A Flight that has taken off and hovers at ALTITUDE_M."""
+    flight = Flight(scenario, config or _config())
+    flight.step()
+    assert flight.core.takeoff()[0]
+    assert flight.run(15.0, until=lambda f: f.core.mission.mode == Mode.HOVER)
+    flight.run(1.0)
+    return flight
+
+
+def _series(flight, key, since_s):
+    entries = [e for e in flight.log if e['t_s'] >= since_s]
+    return np.array([e['t_s'] for e in entries]) - since_s, np.array([e[key] for e in entries])
+
+
+def _pitch_rad(q):
+    return Rotation.from_quat(q).as_euler('ZYX')[:, 1]
+
+
+def test_takeoff_and_a_1_m_forward_step_settles_without_pitching():
+    # A fast reference (its 1 s minimum segment) makes the move a smoothed step.
+    flight = _hovering(_config(hover_speed_m_s=3.0))
+    try:
+        p0 = flight.plant.state().p_map
+        assert p0[2] == pytest.approx(ALTITUDE_M, abs=0.02)
+        goal = p0 + [1.0, 0.0, 0.0]
+        t0 = flight.t_s
+        assert flight.core.set_setpoint(goal, 0.0)[0]
+        flight.run(5.0)
+        t, p = _series(flight, 'p_map', t0)
+        _, q = _series(flight, 'q_map_base', t0)
+        x = p[:, 0] - p0[0]
+        assert x.max() - 1.0 < 0.10                       # overshoot < 10 %
+        outside = np.nonzero(np.abs(x - 1.0) > 0.02)[0]   # 2 % band
+        assert t[outside[-1]] < 3.0
+        assert np.degrees(np.abs(_pitch_rad(q))).max() < 2.0
+        assert np.abs(p[:, 2] - p0[2]).max() < 0.05
+    finally:
+        flight.close()
+
+
+def _step_response(t, gain, wn, zeta):
+    wd = wn * np.sqrt(1.0 - zeta ** 2)
+    phi = np.arccos(zeta)
+    return gain * (1.0 - np.exp(-zeta * wn * t) * np.sin(wd * t + phi) / np.sin(phi))
+
+
+def test_external_force_step_follows_the_impedance_model():
+    """Eq. (6) in free flight: M e'' + C e' + K e = F: displacement F/K, damping ratio."""
+    config = _config()
+    flight = _hovering(config)
+    try:
+        gains = config.flight.impedance.free
+        K = flight.core.flight.impedance.gains(contact=False)[0][0]
+        force_n = 1.5
+        p0 = flight.plant.state().p_map.copy()
+        t0 = flight.t_s
+        flight.plant.external_force_map = np.array([force_n, 0.0, 0.0])
+        flight.run(6.0)
+        t, p = _series(flight, 'p_map', t0)
+        x = p[:, 0] - p0[0]
+        assert np.mean(x[t > 5.0]) == pytest.approx(force_n / K, rel=0.05)
+        (gain, wn, zeta), _ = curve_fit(_step_response, t, x, p0=(force_n / K, 2.0, 0.7),
+                                        bounds=([0.0, 0.1, 0.05], [1.0, 20.0, 0.99]))
+        assert zeta == pytest.approx(gains.zeta[0], abs=0.1)
+        assert wn == pytest.approx(gains.wn_rad_s[0], rel=0.15)
+    finally:
+        flight.close()
+
+
+def test_inspection_pushes_5_n_and_reaches_the_poi():
+    config = _config(hold_time_s=5.0)
+    assert config.contact_force == 5.0
+    result = run_mission(SCENARIO, config, 120.0)
+    modes = [m for _, m in result['mode_history']]
+    assert modes == ['IDLE', 'TAKEOFF', 'HOVER', 'SEARCH', 'APPROACH', 'CONTACT', 'HOLD',
+                     'RETREAT', 'LAND', 'IDLE']
+    assert result['success']
+    assert result['hold_time_s'] == pytest.approx(5.0, abs=0.01)
+    assert result['force_mean_n'] == pytest.approx(5.0, abs=0.1)
+    assert result['force_rms_error_n'] <= 0.2
+    assert result['contact_lost'] == 0
+    assert result['poi_error_max_m'] < 0.01
+    assert result['max_force_n'] < config.mission.force_limit_n
+
+
+def test_nan_setpoint_is_rejected_and_the_vehicle_holds():
+    flight = _hovering()
+    try:
+        p0 = flight.plant.state().p_map.copy()
+        ok, _ = flight.core.set_setpoint([np.nan, 0.0, ALTITUDE_M], 0.0)
+        assert not ok
+        assert flight.core.set_setpoint([0.0, 0.0, ALTITUDE_M], np.inf)[0] is False
+        t0 = flight.t_s
+        flight.run(2.0)
+        _, p = _series(flight, 'p_map', t0)
+        assert np.abs(p - p0).max() < 0.01
+        assert flight.status['mode'] == 'HOVER'
+        assert flight.status['rejected_setpoints'] == 2
+        assert all(np.all(np.isfinite(e['command'].as_array())) for e in flight.log)
+    finally:
+        flight.close()
+
+
+def test_stale_odometry_descends_and_lands():
+    flight = _hovering()
+    try:
+        z_ground = flight.log[0]['p_map'][2]      # resting on the skid before takeoff
+        t0 = flight.t_s
+        flight.odometry_enabled = False
+        assert flight.run(40.0, until=lambda f: f.core.mission.mode == Mode.IDLE)
+        assert flight.status['failsafe_reason'] == 'odometry_stale'
+        modes = {e['mode'] for e in flight.log if e['t_s'] >= t0}
+        assert 'FAILSAFE_LAND' in modes
+        flight.run(2.0)       # disarmed: whatever height is left is dropped
+        t, p = _series(flight, 'p_map', t0)
+        v_z = np.gradient(p[:, 2], t)
+        assert p[-1, 2] == pytest.approx(z_ground, abs=0.02)
+        assert v_z.min() > -1.0           # no fall: at most a gentle touchdown
+        tilt = Rotation.from_quat(flight.plant.state().q_map_base).magnitude()
+        assert np.degrees(tilt) < 5.0
+    finally:
+        flight.close()
+
+
+def test_force_above_the_limit_retreats():
+    # Start near the wall so the approach is short.
+    scenario = dataclasses.replace(SCENARIO, start_xyz_m=[1.3, 0.0, 0.0])
+    config = _config(standoff_m=0.25)
+    flight = Flight(scenario, config)
+    try:
+        flight.step()
+        assert flight.core.inspect()[0]
+        assert flight.run(60.0, until=lambda f: f.status.get('in_contact') or (
+            f.status['mode'] == 'CONTACT' and f.core.f_normal_n > 2.0))
+        wall_x = flight.plant.world.target_poi_map[0]
+        # A gust pushes the vehicle into the wall beyond the force limit.
+        flight.plant.external_force_map = np.array([25.0, 0.0, 0.0])
+        assert flight.run(1.0, until=lambda f: f.core.mission.mode == Mode.RETREAT)
+        flight.plant.external_force_map = np.zeros(3)
+        assert flight.status['failsafe_reason'] == 'force_limit'
+        assert max(e['push_n'] for e in flight.log) > config.mission.force_limit_n
+        flight.run(8.0)
+        tip_gap = wall_x - flight.plant.tool_tip_map()[0]
+        assert tip_gap == pytest.approx(config.mission.standoff_m, abs=0.05)
+        assert flight.log[-1]['push_n'] == 0.0
+    finally:
+        flight.close()

@@ -1,0 +1,89 @@
+"""ControllerCore without a plant: wiring, frames, guards (the closed loop is test_closed_loop)."""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.config import ConfigError, from_dict
+from uav_tilt_common.state import VehicleState
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
+from uav_tilt_control.impedance import contact_depth_for_force
+
+VEHICLE = VehicleParams()
+DT_S = 1.0 / 300.0
+WALL_NORMAL = np.array([-1.0, 0.0, 0.0])     # a wall ahead (+x), facing the vehicle
+
+
+def _state(t_s, yaw_rad=0.0, p=(0.0, 0.0, 0.1)):
+    return VehicleState(t_s, np.array(p, dtype=float),
+                        Rotation.from_euler('z', yaw_rad).as_quat(), np.zeros(3), np.zeros(3))
+
+
+def _core(**kw):
+    core = ControllerCore(VEHICLE, from_dict(ControllerConfig, dict(
+        target_source='ground_truth', **kw)))
+    # target frame z_t = the wall normal
+    q_map_t = Rotation.from_matrix(np.column_stack([[0, -1, 0], [0, 0, 1], WALL_NORMAL]))
+    assert core.on_ground_truth_target([2.5, 0.0, 1.5], q_map_t.as_quat())
+    return core
+
+
+def test_mission_uses_the_impedance_contact_k_z():
+    core = _core(**{'flight.impedance.contact.wn_rad_s': [4.0, 4.0, 5.0],
+                    'contact_force': 3.0})
+    k_z = VEHICLE.mass_kg * 5.0 ** 2
+    assert core.mission.k_contact_z_n_per_m == pytest.approx(k_z)
+    assert core.mission.contact_force_n == 3.0
+    assert contact_depth_for_force(3.0, core.mission.k_contact_z_n_per_m) == 3.0 / k_z
+
+
+def test_contact_force_at_or_above_the_force_limit_is_refused():
+    with pytest.raises(ConfigError, match='contact_force'):
+        _core(contact_force=16.0)
+
+
+def test_idle_and_before_odometry_the_rotors_are_off():
+    core = _core()
+    command, status = core.tick(0.0, np.zeros(3), DT_S)
+    assert np.all(command.thrusts_n == 0.0) and status['input_fault']
+    core.on_odometry(_state(0.0))
+    command, status = core.tick(0.0, np.zeros(3), DT_S)
+    assert status['mode'] == 'IDLE' and np.all(command.thrusts_n == 0.0)
+
+
+def test_autostart_takes_off_and_commands_stay_finite_and_non_negative():
+    core = _core(autostart='inspect')
+    for k in range(300):
+        core.on_odometry(_state(k * DT_S))
+        gyro = np.full(3, np.nan) if k == 150 else np.zeros(3)
+        command, status = core.tick(k * DT_S, gyro, DT_S)
+        assert np.all(np.isfinite(command.as_array()))
+        assert np.all(command.thrusts_n >= 0.0)
+    assert status['mode'] == 'TAKEOFF'
+    assert np.sum(command.thrusts_n) > 0.0
+
+
+def test_wrench_is_rotated_to_map_and_the_push_is_positive():
+    # facing the wall, yawed: the wall pushes back along -x_FLU = +normal
+    core = _core()
+    core.on_odometry(_state(0.0, yaw_rad=0.0))
+    core.on_wrench([-4.0, 0.0, 0.0], np.zeros(3))
+    core.tick(0.0, np.zeros(3), DT_S)
+    assert core.f_normal_n == pytest.approx(4.0)
+    # yawed 90 deg the same reading is a force along -y_map: no push on this wall
+    core.on_odometry(_state(DT_S, yaw_rad=np.pi / 2))
+    core.on_wrench([-4.0, 0.0, 0.0], np.zeros(3))
+    core.tick(DT_S, np.zeros(3), DT_S)
+    assert core.f_normal_n == pytest.approx(0.0, abs=1e-9)
+
+
+def test_ground_truth_is_ignored_with_vision_and_no_target_frames_are_counted():
+    core = ControllerCore(VEHICLE, ControllerConfig(target_source='vision'))
+    assert not core.on_ground_truth_target([2.5, 0.0, 1.5], [0.0, 0.0, 0.0, 1.0])
+    core.on_odometry(_state(0.0))
+    no_target = np.zeros(36)
+    no_target[0] = -1.0
+    assert not core.on_target_measurement(0.0, np.zeros(3), np.zeros(4), no_target)
+    assert core.estimator.counters['no_target'] == 1
+    _, status = core.tick(0.0, np.zeros(3), DT_S)
+    assert not status['target_valid'] and status['target_source'] == 'vision'

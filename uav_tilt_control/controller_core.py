@@ -1,0 +1,196 @@
+"""The flight controller without ROS: odometry, F/T, target -> mission -> flight core.
+
+:class:`ControllerCore` is what controller_node and the in-process runner share. It runs one
+control tick per IMU sample (PX4 style): the rate loop uses the IMU gyro, everything else the
+newest odometry, whose age drives the stale-odometry failsafe. While the odometry is stale
+the vehicle flies blind: position and velocity are taken to be the reference (so only the
+reference's feed-forward acts) and the attitude is the last odometry attitude integrated
+with the gyro.
+"""
+import dataclasses
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.config import nested, param
+from uav_tilt_common.state import ActuatorCommand, VehicleState
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control import frames
+from uav_tilt_control.flight_core import FlightCore, FlightCoreConfig
+from uav_tilt_control.mission import DEFAULT_CONTACT_FORCE_N, Mission, MissionConfig, Mode
+from uav_tilt_control.target_estimator import TargetEstimator, TargetEstimatorConfig
+
+TARGET_SOURCES = ('vision', 'ground_truth')
+
+
+@dataclasses.dataclass
+class ControllerConfig:
+    """Controller parameters; the top-level names are DESIGN section 7's."""
+
+    target_source: str = param('vision', choices=TARGET_SOURCES)
+    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0)  # N, along -normal
+    autostart: str = param('', choices=('', 'inspect'))
+    flight: FlightCoreConfig = nested(FlightCoreConfig)
+    mission: MissionConfig = nested(MissionConfig)
+    estimator: TargetEstimatorConfig = nested(TargetEstimatorConfig)
+
+
+class ControllerCore:
+    """Owns FlightCore, Mission and TargetEstimator; feed it messages, call :meth:`tick`."""
+
+    def __init__(self, vehicle: VehicleParams, config: ControllerConfig = None):
+        self.vehicle = vehicle
+        self.config = config or ControllerConfig()
+        cfg = self.config
+        self.flight = FlightCore(vehicle, cfg.flight)
+        # The mission turns the wanted push into a depth with the impedance law's own K_z.
+        k_contact_z = self.flight.impedance.gains(contact=True)[0][2]
+        self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z)
+        self.estimator = TargetEstimator(cfg.estimator, *frames.camera_pose_in_base(vehicle))
+        self._odom = None
+        self._q_blind = None
+        self._ground_truth = None
+        self._f_contact_map = np.zeros(3)
+        self._autostarted = False
+        self._was_idle = True
+        self.f_normal_n = 0.0
+
+    # ---- inputs ----
+
+    def on_odometry(self, state: VehicleState):
+        """Mocap-like odometry (map -> base_link); also feeds the estimator's pose history."""
+        self._odom = state
+        self._q_blind = np.asarray(state.q_map_base, dtype=float)
+        self.estimator.add_state(state)
+
+    def on_wrench(self, force_ee, torque_ee):
+        """F/T reading at the tool (ee_link, FLU axes): the contact force on the vehicle."""
+        force_ee = np.asarray(force_ee, dtype=float)
+        if self._odom is None or not np.all(np.isfinite(force_ee)):
+            return
+        self._f_contact_map = Rotation.from_quat(self._odom.q_map_base).apply(force_ee)
+
+    def on_target_measurement(self, stamp_s, p_cam, q_cam_t, covariance):
+        """Vision ``target/pose`` in the camera optical frame; returns True when accepted."""
+        if self.config.target_source != 'vision':
+            return False
+        cov = np.asarray(covariance, dtype=float)
+        if cov.size and cov.ravel()[0] == -1.0:
+            return self.estimator.add_measurement(stamp_s, p_cam, np.eye(3), cov)
+        if not np.all(np.isfinite(q_cam_t)) or np.linalg.norm(q_cam_t) < 0.5:
+            self.estimator.counters['rejected_nonfinite'] += 1
+            return False
+        R_cam_t = Rotation.from_quat(q_cam_t).as_matrix()
+        return self.estimator.add_measurement(stamp_s, p_cam, R_cam_t, cov)
+
+    def on_ground_truth_target(self, p_map, q_map_t):
+        """Evaluation mode only: the true target pose (map); ignored with vision."""
+        if self.config.target_source != 'ground_truth':
+            return False
+        p_map, q_map_t = np.asarray(p_map, dtype=float), np.asarray(q_map_t, dtype=float)
+        if not (np.all(np.isfinite(p_map)) and np.all(np.isfinite(q_map_t))
+                and np.linalg.norm(q_map_t) > 0.5):
+            return False
+        self._ground_truth = (p_map, Rotation.from_quat(q_map_t).as_matrix())
+        return True
+
+    # ---- services: each returns (ok, message) ----
+
+    def takeoff(self):
+        """Take off and hover."""
+        return self.mission.takeoff()
+
+    def inspect(self):
+        """Run the inspection mission."""
+        return self.mission.inspect()
+
+    def abort(self):
+        """Leave the wall or stop and hover."""
+        return self.mission.abort()
+
+    def land(self):
+        """Land (retreating from the wall first)."""
+        return self.mission.land()
+
+    def set_setpoint(self, p_map, yaw_rad):
+        """Move the hover point (map) and heading; HOVER only, non-finite rejected."""
+        return self.mission.set_hover_setpoint(p_map, yaw_rad)
+
+    # ---- the tick ----
+
+    def tick(self, t_s, gyro, dt_s):
+        """One control tick at IMU time ``t_s``; returns (ActuatorCommand, status dict)."""
+        gyro = np.asarray(gyro, dtype=float)
+        if self._odom is None or not np.all(np.isfinite(gyro)):
+            return self._idle_command(), self._status(t_s, np.inf, {'input_fault': True}, None)
+        odom_age_s = t_s - self._odom.t_s
+        if self._ground_truth is not None:
+            # the latched pose is re-stamped so the estimate stays valid
+            self.estimator.add_ground_truth(t_s, *self._ground_truth)
+        target = self.estimator.estimate(t_s)
+        self.f_normal_n = self._normal_force(target)
+        if self.config.autostart == 'inspect' and not self._autostarted:
+            self._autostarted = self.mission.inspect()[0]
+        setpoint = self.mission.update(t_s, self._odom, target, self.f_normal_n, odom_age_s)
+        if self.mission.mode == Mode.IDLE:
+            self._was_idle = True
+            return self._idle_command(), self._status(t_s, odom_age_s, {}, target)
+        if self._was_idle:
+            self.flight.reset()
+            self._was_idle = False
+        stale = self.mission.mode == Mode.FAILSAFE_LAND and not (
+            odom_age_s <= self.config.mission.odom_stale_s)
+        if stale:
+            state, setpoint = self._blind(t_s, setpoint, gyro, dt_s)
+        else:
+            state = VehicleState(t_s, self._odom.p_map, self._odom.q_map_base,
+                                 self._odom.v_map, gyro)
+        command, diagnostics = self.flight.step(state, setpoint, self._f_contact_map, dt_s)
+        return self._bounded(command), self._status(t_s, odom_age_s, diagnostics, target)
+
+    # ---- helpers ----
+
+    def _normal_force(self, target):
+        """Push on the wall along -normal [N] (positive pushing), from the F/T reading."""
+        if target is not None:
+            return float(self._f_contact_map @ target.normal_map)
+        # no estimate: the tool axis stands for the normal
+        x_tool_map = Rotation.from_quat(self._odom.q_map_base).apply([1.0, 0.0, 0.0])
+        return float(-self._f_contact_map @ x_tool_map)
+
+    def _blind(self, t_s, setpoint, gyro, dt_s):
+        """(state, setpoint) for flying without odometry: only feed-forward acts, and never
+        upwards, so the vehicle keeps descending until the ground stops it."""
+        self._q_blind = (Rotation.from_quat(self._q_blind)
+                         * Rotation.from_rotvec(gyro * dt_s)).as_quat()
+        p_map = setpoint.origin_map + setpoint.R_map_t @ setpoint.lambda_d_t
+        v_map = setpoint.R_map_t @ setpoint.dlambda_d_t
+        a_map = setpoint.R_map_t @ setpoint.ddlambda_d_t
+        a_map[2] = min(a_map[2], 0.0)
+        setpoint = dataclasses.replace(setpoint, ddlambda_d_t=setpoint.R_map_t.T @ a_map)
+        return VehicleState(t_s, p_map, self._q_blind, v_map, gyro), setpoint
+
+    def _idle_command(self):
+        """Disarmed: rotors stopped, arms level."""
+        return ActuatorCommand(np.zeros(4), 0.0, 0.0)
+
+    def _bounded(self, command):
+        values = command.as_array()
+        if not np.all(np.isfinite(values)):
+            return self.flight.safe_command()
+        command.thrusts_n = np.clip(command.thrusts_n, 0.0, self.vehicle.f_max_n)
+        return command
+
+    def _status(self, t_s, odom_age_s, diagnostics, target):
+        status = dict(self.mission.status)
+        status.update(
+            t_s=float(t_s),
+            target_source=self.config.target_source,
+            target_valid=bool(target is not None and target.valid),
+            odom_age_s=float(odom_age_s),
+            f_normal_n=self.f_normal_n,
+            saturated=bool(diagnostics.get('saturated', False)),
+            input_fault=bool(diagnostics.get('input_fault', False)),
+        )
+        status.update({f'target_{k}': v for k, v in self.estimator.counters.items()})
+        return status

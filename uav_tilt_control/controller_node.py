@@ -1,0 +1,235 @@
+"""controller_node: the flight controller on ROS 2 (DESIGN sections 3-4), a shell around
+:class:`ControllerCore`.
+
+Each `imu` message runs one control tick and is answered on `actuators/cmd` stamped with
+the IMU stamp (the plant's lockstep waits for exactly that). Bad messages are rejected,
+counted and logged at most once a second.
+"""
+import collections
+import dataclasses
+import math
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, WrenchStamped
+from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import Imu, JointState
+from std_srvs.srv import Trigger
+
+from uav_tilt_common import names, ros_msgs, ros_qos
+from uav_tilt_common.config import nested, param
+from uav_tilt_common.rate_limit import RejectCounter
+from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
+
+# Loop statistics cover the last few seconds of ticks.
+STATS_WINDOW = 3000
+# An IMU stamp gap outside (0, MAX_DT_S] is a restart or a stall: use the nominal period.
+MAX_DT_S = 0.1
+NOMINAL_DT_S = 1.0 / 300.0
+
+
+@dataclasses.dataclass
+class ControllerNodeConfig(ControllerConfig):
+    """Parameters of controller_node: the core's, the vehicle model and the status rate."""
+
+    vehicle: VehicleParams = nested(VehicleParams)
+    status_rate_hz: float = param(10.0, lo=0.5, hi=50.0)
+
+
+class ControllerNode(Node):
+    """Thin shell: messages -> ControllerCore -> actuators/cmd and controller/status."""
+
+    def __init__(self):
+        super().__init__('controller',
+                         parameter_overrides=[Parameter('use_sim_time', value=True)])
+        self.cfg = declare_config(self, ControllerNodeConfig)
+        self.core = ControllerCore(self.cfg.vehicle, self.cfg)
+        q = ros_qos.CONTROL
+        self.pub_cmd = ros_qos.quiet_publisher(self, JointState, names.ACTUATORS_CMD, q)
+        self.pub_status = ros_qos.quiet_publisher(self, DiagnosticArray,
+                                                  names.CONTROLLER_STATUS, ros_qos.STATUS)
+        sub = ros_qos.quiet_subscription
+        sub(self, Odometry, names.ODOM, self.on_odom, q)
+        sub(self, WrenchStamped, names.EE_WRENCH, self.on_wrench, q)
+        sub(self, PoseWithCovarianceStamped, names.TARGET_POSE, self.on_target, q)
+        sub(self, PoseStamped, names.SETPOINT_POSE, self.on_setpoint, q)
+        if self.cfg.target_source == 'ground_truth':
+            sub(self, PoseStamped, names.GROUND_TRUTH_TARGET, self.on_ground_truth,
+                ros_qos.LATCHED)
+        sub(self, Imu, names.IMU, self.on_imu, q)
+        for srv, method in ((names.SRV_TAKEOFF, self.core.takeoff),
+                            (names.SRV_INSPECT, self.core.inspect),
+                            (names.SRV_ABORT, self.core.abort),
+                            (names.SRV_LAND, self.core.land)):
+            self.create_service(Trigger, srv, self._trigger(srv, method))
+
+        self.rejects = RejectCounter()
+        self.status = {}
+        self.last_stamp_ns = None
+        self.last_cmd = None
+        self.saturated_ticks = 0
+        self.ticks = 0
+        self.wall_last = None
+        self.periods_s = collections.deque(maxlen=STATS_WINDOW)
+        self.compute_s = collections.deque(maxlen=STATS_WINDOW)
+        # Wall clock: status keeps coming when sim time stalls (the plant is gone).
+        self.create_timer(1.0 / self.cfg.status_rate_hz, self.on_status,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(f'controller up: target_source={self.cfg.target_source} '
+                               f'contact_force={self.cfg.contact_force} N '
+                               f'autostart={self.cfg.autostart!r}')
+
+    # --- inputs -------------------------------------------------------------------------
+    def _reject(self, reason, detail):
+        if self.rejects.reject(reason):
+            self.get_logger().warn(f'rejected {detail}; {self.rejects.total} rejected so far')
+
+    def _frame_ok(self, msg, frame_id, what):
+        if msg.header.frame_id != frame_id:
+            self._reject('frame', f'{what} in frame {msg.header.frame_id!r}, not {frame_id!r}')
+            return False
+        return True
+
+    def _finite(self, values, what):
+        if not all(math.isfinite(v) for v in values):
+            self._reject('non_finite', f'{what} with non-finite values')
+            return False
+        return True
+
+    def on_odom(self, msg):
+        """Odometry map -> base_link."""
+        if not self._frame_ok(msg, names.FRAME_MAP, 'odom'):
+            return
+        if msg.child_frame_id != names.FRAME_BASE:
+            self._reject('frame', f'odom with child frame {msg.child_frame_id!r}')
+            return
+        state = ros_msgs.state_from_odometry(msg)
+        if self._finite(np.concatenate([state.p_map, state.q_map_base, state.v_map]), 'odom'):
+            self.core.on_odometry(state)
+
+    def on_wrench(self, msg):
+        """F/T sensor at the tool, ee_link."""
+        force = ros_msgs.vector_of(msg.wrench.force)
+        torque = ros_msgs.vector_of(msg.wrench.torque)
+        if self._frame_ok(msg, names.FRAME_EE, 'ee_wrench') and self._finite(
+                np.concatenate([force, torque]), 'ee_wrench'):
+            self.core.on_wrench(force, torque)
+
+    def on_target(self, msg):
+        """Vision target pose in the camera optical frame (covariance[0] = -1: none)."""
+        if not self._frame_ok(msg, names.FRAME_CAMERA, 'target/pose'):
+            return
+        pose = msg.pose.pose
+        p_cam = ros_msgs.vector_of(pose.position)
+        o = pose.orientation
+        q_cam_t = np.array([o.x, o.y, o.z, o.w])
+        cov = np.asarray(msg.pose.covariance, dtype=float)
+        if cov[0] != -1.0 and not self._finite(np.concatenate([p_cam, q_cam_t, cov]),
+                                               'target/pose'):
+            return
+        self.core.on_target_measurement(ros_msgs.from_stamp(msg.header.stamp), p_cam, q_cam_t,
+                                        cov)
+
+    def on_ground_truth(self, msg):
+        """Evaluation mode: the true target pose in map."""
+        p_map, q_map_t = _pose_arrays(msg.pose)
+        if self._frame_ok(msg, names.FRAME_MAP, 'ground_truth/target') and self._finite(
+                np.concatenate([p_map, q_map_t]), 'ground_truth/target'):
+            self.core.on_ground_truth_target(p_map, q_map_t)
+
+    def on_setpoint(self, msg):
+        """A hover point and heading in map (accepted in HOVER)."""
+        p_map, q = _pose_arrays(msg.pose)
+        if not (self._frame_ok(msg, names.FRAME_MAP, 'setpoint/pose')
+                and self._finite(np.concatenate([p_map, q]), 'setpoint/pose')):
+            return
+        if np.linalg.norm(q) < 0.5:
+            self._reject('quaternion', 'setpoint/pose with a zero quaternion')
+            return
+        yaw = Rotation.from_quat(q).as_euler('ZYX')[0]
+        _, message = self.core.set_setpoint(p_map, yaw)
+        self.get_logger().info(f'setpoint {np.round(p_map, 3).tolist()}: {message}')
+
+    def _trigger(self, name, method):
+        def callback(request, response):
+            response.success, response.message = method()
+            self.get_logger().info(f'{name}: {response.message}')
+            return response
+        return callback
+
+    # --- the 300 Hz loop ----------------------------------------------------------------
+    def on_imu(self, msg):
+        """One control tick, answered with actuators/cmd stamped like the IMU message."""
+        gyro = ros_msgs.vector_of(msg.angular_velocity)
+        if not (self._frame_ok(msg, names.FRAME_BASE, 'imu') and self._finite(gyro, 'imu')):
+            return
+        stamp_ns = ros_msgs.stamp_ns(msg.header.stamp)
+        if stamp_ns == self.last_stamp_ns:
+            # the plant re-sent a tick it is still waiting on: answer it again
+            self.pub_cmd.publish(self.last_cmd)
+            return
+        wall = time.perf_counter()
+        if self.wall_last is not None:
+            self.periods_s.append(wall - self.wall_last)
+        self.wall_last = wall
+        dt_s = NOMINAL_DT_S
+        if self.last_stamp_ns is not None and 0 < stamp_ns - self.last_stamp_ns <= MAX_DT_S * 1e9:
+            dt_s = (stamp_ns - self.last_stamp_ns) * 1e-9
+        self.last_stamp_ns = stamp_ns
+        command, self.status = self.core.tick(stamp_ns * 1e-9, gyro, dt_s)
+        self.last_cmd = ros_msgs.actuator_msg(command.thrusts_n,
+                                              (command.alpha_rad, command.beta_rad),
+                                              msg.header.stamp)
+        self.pub_cmd.publish(self.last_cmd)
+        self.compute_s.append(time.perf_counter() - wall)
+        self.ticks += 1
+        self.saturated_ticks += int(self.status['saturated'])
+
+    # --- status -------------------------------------------------------------------------
+    def on_status(self):
+        """controller/status: mode, mission, saturation, rejected inputs, loop statistics."""
+        values = dict(self.status) or dict(mode='WAITING_FOR_SENSORS')
+        values.update(ticks=self.ticks, saturated_ticks=self.saturated_ticks,
+                      target_source=self.cfg.target_source,
+                      rejected_inputs=self.rejects.total)
+        values.update(_loop_stats(self.periods_s, self.compute_s))
+        values.update({f'rejected_{k}': v for k, v in self.rejects.counts.items()})
+        level = DiagnosticStatus.WARN if values.get('failsafe_reason') else DiagnosticStatus.OK
+        self.pub_status.publish(ros_msgs.diagnostics_msg(
+            'controller', values, ros_msgs.to_stamp(values.get('t_s', 0.0)), level,
+            values.get('failsafe_reason') or 'ok'))
+
+
+def _pose_arrays(pose):
+    o = pose.orientation
+    return ros_msgs.vector_of(pose.position), np.array([o.x, o.y, o.z, o.w])
+
+
+def _loop_stats(periods_s, compute_s):
+    """Loop rate and wall-clock period jitter of the IMU callbacks, and compute time."""
+    if len(periods_s) < 2:
+        return {}
+    periods = np.asarray(periods_s)
+    compute_us = np.asarray(compute_s) * 1e6
+    jitter_ms = np.abs(periods - NOMINAL_DT_S) * 1e3
+    return dict(loop_rate_hz=1.0 / periods.mean(),
+                loop_period_ms_p50=float(np.percentile(periods, 50)) * 1e3,
+                loop_jitter_ms_p99=float(np.percentile(jitter_ms, 99)),
+                compute_us_p50=float(np.percentile(compute_us, 50)),
+                compute_us_p99=float(np.percentile(compute_us, 99)))
+
+
+def main(args=None):
+    """Entry point of the controller_node executable."""
+    return run_node(ControllerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

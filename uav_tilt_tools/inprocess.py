@@ -1,0 +1,132 @@
+"""Plant core + controller core in one process at 300 Hz, no ROS (tests, campaigns, benches).
+
+The same cores as plant_node and controller_node, wired the way the nodes are: each tick the
+plant's sensors go to the controller (odometry, F/T, then the IMU tick) and its command goes
+back. Vision comes in through an optional callable.
+"""
+import time
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
+from uav_tilt_control.mission import Mode
+from uav_tilt_sim.plant import Plant, PlantCoreConfig
+
+
+class Flight:
+    """A plant and a controller stepped together; keeps a per-tick log.
+
+    ``vision(plant, t_s)`` (optional) returns a list of ``target/pose`` measurements
+    (stamp_s, p_cam, q_cam_t, covariance) to hand to the controller this tick.
+    """
+
+    def __init__(self, scenario, controller_config=None, vehicle=None, plant_config=None,
+                 vision=None):
+        self.vehicle = vehicle or VehicleParams()
+        plant_config = plant_config or PlantCoreConfig(vehicle=self.vehicle)
+        self.plant = Plant(plant_config, scenario, render=vision is not None)
+        self.core = ControllerCore(self.vehicle, controller_config or ControllerConfig())
+        self.vision = vision
+        self.odometry_enabled = True
+        self.status = {}
+        self.log = []               # one dict per tick, see :meth:`step`
+        self.tick_s = []            # wall-clock compute time of each ControllerCore.tick
+        world = self.plant.world
+        if world.target_poi_map is not None:
+            self.core.on_ground_truth_target(world.target_poi_map,
+                                             Rotation.from_matrix(world.R_map_target).as_quat())
+
+    @property
+    def t_s(self):
+        """Simulated time."""
+        return self.plant.t_s
+
+    def step(self):
+        """One 300 Hz tick: sensors -> controller -> plant."""
+        plant, core = self.plant, self.core
+        sensors = plant.read_sensors()
+        if self.odometry_enabled:
+            core.on_odometry(sensors.odom)
+        core.on_wrench(sensors.ee_force_n, sensors.ee_torque_nm)
+        if self.vision is not None:
+            for measurement in self.vision(plant, sensors.t_s):
+                core.on_target_measurement(*measurement)
+        start = time.perf_counter()
+        command, self.status = core.tick(sensors.t_s, sensors.gyro_rad_s, plant.dt_tick)
+        self.tick_s.append(time.perf_counter() - start)
+        truth = plant.state()
+        self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
+                             q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
+                             push_n=self._true_push_n(), command=command))
+        plant.step(command)
+
+    def run(self, duration_s, until=None):
+        """Step for ``duration_s`` or until ``until(self)`` is true; returns whether it was."""
+        for _ in range(int(round(duration_s / self.plant.dt_tick))):
+            if until is not None and until(self):
+                return True
+            self.step()
+        return until is not None and until(self)
+
+    def close(self):
+        """Release the physics server."""
+        self.plant.close()
+
+    def _true_push_n(self):
+        """Contact force on the wall along -normal [N] from the plant's truth."""
+        world = self.plant.world
+        if world.R_map_target is None:
+            return 0.0
+        force_ee, _ = self.plant.contact_wrench_ee()
+        R_map_base = Rotation.from_quat(self.plant.state().q_map_base).as_matrix()
+        return float((R_map_base @ force_ee) @ world.R_map_target[:, 2])
+
+
+def mission_result(flight, contact_force_n):
+    """Summary of an inspection run (DESIGN section 7 ``summary.json`` names)."""
+    log = flight.log
+    modes = [entry['mode'] for entry in log]
+    history = [(log[0]['t_s'], modes[0])] + [
+        (log[i]['t_s'], modes[i]) for i in range(1, len(log)) if modes[i] != modes[i - 1]]
+    hold = [entry for entry in log if entry['mode'] == Mode.HOLD.value]
+    push = np.array([entry['push_n'] for entry in log])
+    poi = flight.plant.world.target_poi_map
+    result = dict(success=bool(flight.status.get('success', False)),
+                  contact_lost=int(flight.status.get('contact_lost', 0)),
+                  failsafe_reason=flight.status.get('failsafe_reason', ''),
+                  max_force_n=float(push.max()) if push.size else 0.0,
+                  mode_history=[(float(t), m) for t, m in history],
+                  poi_error_m=None, poi_error_max_m=None, force_mean_n=None,
+                  force_rms_error_n=None, hold_time_s=0.0)
+    landed = [t for t, m in history[1:] if m == Mode.IDLE.value]
+    result['mission_time_s'] = float(landed[-1] if landed else log[-1]['t_s'])
+    if hold and poi is not None:
+        errors = np.array([np.linalg.norm(entry['tip_map'] - poi) for entry in hold])
+        hold_push = np.array([entry['push_n'] for entry in hold])
+        result.update(poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()),
+                      force_mean_n=float(hold_push.mean()),
+                      force_rms_error_n=float(np.sqrt(np.mean((hold_push - contact_force_n)
+                                                              ** 2))),
+                      hold_time_s=float(hold[-1]['t_s'] - hold[0]['t_s']))
+    return result
+
+
+def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None,
+                plant_config=None, vision=None):
+    """Fly the inspection mission (``inspect`` at t = 0) until landed or ``duration_s``.
+
+    Returns :func:`mission_result`'s dict.
+    """
+    config = controller_config or ControllerConfig()
+    flight = Flight(scenario, config, vehicle, plant_config, vision)
+    try:
+        flight.step()
+        ok, message = flight.core.inspect()
+        if not ok:
+            raise RuntimeError(f'inspect refused: {message}')
+        flight.run(duration_s, until=lambda f: f.core.mission.mode == Mode.IDLE)
+        return mission_result(flight, config.contact_force)
+    finally:
+        flight.close()
