@@ -96,3 +96,4 @@ def test_degenerate_box_gives_none():
     img = np.full((H, W, 3), 128, np.uint8)
     assert find_poi(img, (10, 10, 12, 12)) is None
     assert find_poi(img, (W + 5, H + 5, W + 50, H + 50)) is None
+    assert find_poi(img, (W - 10, H - 10, W + 100, H + 100)) is None

@@ -13,6 +13,7 @@ POI_UV = {'bolt_plate': (0.5, 0.5)}
 # Bolt head across-corners diameter as a fraction of the plate side.
 BOLT_HEAD_DIAMETER_FRAC = 0.18
 
+
 def _fractal_noise(rng, shape_hw, octaves=4, base_cells=4):
     """Smooth value noise in [-1, 1], summed over octaves of halving amplitude."""
     h, w = shape_hw

@@ -1,25 +1,37 @@
 """`uav-tilt bench sim|control|vision`: one JSON object on stdout (DESIGN section 7)."""
-import importlib
 import json
+import os
 
-# what -> (module, function); each function takes the parsed args' seconds.
-BENCHES = {
-    'sim': ('uav_tilt_tools.bench_sim', 'bench_sim'),
-}
+
+def _sim(seconds):
+    from uav_tilt_tools.bench_sim import bench_sim
+    return bench_sim(seconds)
+
+
+def _control(seconds):
+    from uav_tilt_tools.bench_control import bench_control
+    return bench_control(duration_s=seconds)
+
+
+# Imported on demand: the sim bench need not load torch or the controller.
+BENCHES = {'sim': _sim, 'control': _control}
 
 
 def register(sub):
     """Add the `bench` sub-command."""
     parser = sub.add_parser('bench', help='speed measurements, one JSON object on stdout')
     parser.add_argument('what', choices=sorted(BENCHES))
-    parser.add_argument('--seconds', type=float, default=10.0,
-                        help='length of each measurement (simulated seconds for sim)')
+    parser.add_argument('--seconds', type=float, default=None,
+                        help='length of each measurement (default: 10 s sim, 30 s control)')
     parser.set_defaults(func=run)
 
 
 def run(args):
-    """Run one bench and print its JSON."""
-    module, function = BENCHES[args.what]
-    result = getattr(importlib.import_module(module), function)(args.seconds)
-    print(json.dumps(result))
+    """Run one bench in a ROS domain of its own and print its JSON."""
+    # Benches start node processes: keep them local and away from a running system.
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+    defaults = {'sim': 10.0, 'control': 30.0}
+    seconds = args.seconds if args.seconds is not None else defaults[args.what]
+    print(json.dumps(BENCHES[args.what](seconds)))
     return 0

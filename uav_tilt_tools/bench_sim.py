@@ -45,19 +45,16 @@ def core_rtf(seconds, camera):
 
 def ros_lockstep_rtf(ticks):
     """Real-time factor of plant_node + hover_driver in lockstep (separate processes)."""
-    env = dict(os.environ)
-    env.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
-    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     ros_args = ['--ros-args', '-r', '__ns:=/uav']
     with tempfile.TemporaryDirectory() as tmp:
         report = os.path.join(tmp, 'driver.json')
         plant = subprocess.Popen(
             [sys.executable, '-m', 'uav_tilt_sim.plant_node', *ros_args,
-             '-p', 'camera_enabled:=false'], env=env,
+             '-p', 'camera_enabled:=false'],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             subprocess.run([sys.executable, '-m', 'uav_tilt_tools.hover_driver', '--ticks',
-                            str(ticks), '--out', report, *ros_args], env=env, check=True,
+                            str(ticks), '--out', report, *ros_args], check=True,
                            timeout=600)
             with open(report, encoding='utf-8') as stream:
                 return json.load(stream)['rtf']

@@ -39,6 +39,11 @@ class KltBoxTracker:
         """True until init and after an update that lost the target."""
         return self.box_xyxy is None
 
+    @property
+    def points(self):
+        """(N, 2) feature points being tracked; empty when lost."""
+        return np.zeros((0, 2), np.float32) if self.lost else self._pts.copy()
+
     def init(self, gray, box_xyxy):
         """Start tracking ``box_xyxy`` in ``gray``; returns False when it has too few features."""
         self.box_xyxy = np.asarray(box_xyxy, np.float64).copy()

@@ -52,6 +52,8 @@ def _dark_mask(gray, box_c, bw, bh):
     qx0, qx1 = int(box_c[0] - bw / 4), int(np.ceil(box_c[0] + bw / 4))
     qy0, qy1 = int(box_c[1] - bh / 4), int(np.ceil(box_c[1] + bh / 4))
     centre = gray[max(qy0, 0):qy1, max(qx0, 0):qx1]
+    if centre.size < 16:
+        return np.zeros_like(gray)  # box centre off the image: nothing to threshold
     thr, _ = cv2.threshold(centre.reshape(-1, 1), 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     mask = (gray <= thr).astype(np.uint8)
     # A small kernel: it removes specks and holes but must not carve thin dark strokes

@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 UNOBSERVED_VAR_RAD2 = 1.0e3
 _MIN_POINTS = 12
+_LMEDS_TRIALS = 64
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,8 +75,14 @@ def estimate_target_pose(u_px, v_px, depth_m, K, window_px=10, pixel_sigma_px=0.
 
 
 def _robust_plane(pts, sigma_floor_m, rounds):
-    """(normal toward the camera, centroid, inlier points, residual variance) or None."""
-    keep = np.ones(len(pts), bool)
+    """(normal toward the camera, centroid, inlier points, residual variance) or None.
+
+    A least-median-of-squares seed keeps gross outliers (flying pixels, foreground
+    clutter) from tilting the first fit; least squares rounds then refine it.
+    """
+    if len(pts) < _MIN_POINTS:
+        return None
+    keep = _lmeds_inliers(pts, sigma_floor_m)
     for k in range(rounds + 1):
         if keep.sum() < _MIN_POINTS:
             return None
@@ -83,17 +90,35 @@ def _robust_plane(pts, sigma_floor_m, rounds):
         c = q.mean(axis=0)
         _, _, vt = np.linalg.svd(q - c, full_matrices=False)
         n = vt[2]
-        if n @ c > 0:
-            n = -n
         if k == rounds:
             break
-        res = (pts - c) @ n
-        # MAD scale, floored so that a perfect plane keeps its noise-free points.
-        scale = max(1.4826 * np.median(np.abs(res[keep])), sigma_floor_m)
-        keep = np.abs(res) < 3.0 * scale
+        keep = _inliers(np.abs((pts - c) @ n), keep, sigma_floor_m)
+    if n @ c > 0:
+        n = -n
     res = (q - c) @ n
     sigma2 = max(float(res @ res) / max(len(q) - 3, 1), sigma_floor_m ** 2)
     return n, c, q, sigma2
+
+
+def _inliers(abs_res, keep, sigma_floor_m):
+    """Residuals within 3 robust sigmas (MAD over ``keep``, floored at the sensor noise)."""
+    scale = max(1.4826 * np.median(abs_res[keep]), sigma_floor_m)
+    return abs_res < 3.0 * scale
+
+
+def _lmeds_inliers(pts, sigma_floor_m, n_trials=_LMEDS_TRIALS):
+    """Inliers of the plane through 3 sampled points with the least median residual."""
+    rng = np.random.default_rng(0)  # fixed: the same image gives the same pose
+    tri = pts[rng.integers(0, len(pts), (n_trials, 3))]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norms = np.linalg.norm(normals, axis=1)
+    ok = norms > 1e-12
+    if not ok.any():
+        return np.zeros(len(pts), bool)
+    normals = normals[ok] / norms[ok, None]
+    abs_res = np.abs(np.einsum('tk,tnk->tn', normals, pts[None] - tri[ok, None, 0]))
+    best = int(np.argmin(np.median(abs_res, axis=1)))
+    return _inliers(abs_res[best], np.ones(len(pts), bool), sigma_floor_m)
 
 
 def _covariance(p, n, c, d, q, sigma2, K, pixel_sigma_px):

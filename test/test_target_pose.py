@@ -1,0 +1,109 @@
+"""Target point and normal from analytically rendered depth images of planes."""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_vision.target_pose import (CameraIntrinsics, UNOBSERVED_VAR_RAD2, deproject,
+                                         estimate_target_pose, pose_quaternion_from_normal)
+
+K = CameraIntrinsics(fx=277.0, fy=277.0, cx=160.0, cy=120.0, width=320, height=240)
+
+
+def _plane_scene(rng, noise_m=0.0):
+    """Depth image of a plane at 0.5-1.5 m tilted up to 45 deg, with its POI and normal."""
+    u, v = rng.uniform(40, K.width - 40), rng.uniform(40, K.height - 40)
+    axis = np.r_[rng.normal(size=2), 0.0]
+    tilt = Rotation.from_rotvec(axis / np.linalg.norm(axis) * np.deg2rad(rng.uniform(0, 45)))
+    n = tilt.apply([0.0, 0.0, -1.0])
+    p = deproject(u, v, rng.uniform(0.5, 1.5), K)
+    vv, uu = np.mgrid[0:K.height, 0:K.width]
+    rays = deproject(uu, vv, 1.0, K)
+    depth = (n @ p) / (rays @ n)
+    depth = depth + rng.normal(0.0, noise_m, depth.shape)
+    return depth.astype(np.float32), u, v, p, n
+
+
+def _errors(est, p, n):
+    p_est, n_est, _ = est
+    return (np.linalg.norm(p_est - p),
+            np.rad2deg(np.arccos(np.clip(n_est @ n, -1.0, 1.0))))
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_exact_plane(seed):
+    depth, u, v, p, n = _plane_scene(np.random.default_rng(seed))
+    est = estimate_target_pose(u, v, depth, K)
+    err_p, err_n = _errors(est, p, n)
+    # float32 depth rounding (~1e-7 relative) is the only error left.
+    assert err_p < 2e-3 and err_n < 1.0
+    assert np.linalg.norm(est[1]) == pytest.approx(1.0) and est[1] @ est[0] < 0
+
+
+def test_noisy_plane_median_errors():
+    rng = np.random.default_rng(42)
+    errs = np.array([_errors(estimate_target_pose(u, v, d, K), p, n)
+                     for d, u, v, p, n in (_plane_scene(rng, 0.005) for _ in range(15))])
+    assert np.median(errs[:, 0]) < 0.01 and np.median(errs[:, 1]) < 3.0
+
+
+def test_hole_at_poi_and_outliers_are_tolerated():
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        depth, u, v, p, n = _plane_scene(rng, 0.002)
+        ui, vi = int(round(u)), int(round(v))
+        depth[vi - 3:vi + 4, ui - 3:ui + 4] = np.nan
+        depth[vi + 5, ui - 8:ui + 8] = np.inf
+        depth[vi - 6, ui - 8:ui + 8] = 0.0
+        # Flying pixels / a foreground cable: 10 % of the window far off the plane.
+        mask = rng.random(depth.shape) < 0.1
+        depth[mask] *= 0.8
+        err_p, err_n = _errors(estimate_target_pose(u, v, depth, K), p, n)
+        assert err_p < 0.01 and err_n < 3.0
+
+
+def test_no_valid_depth_gives_none():
+    depth = np.full((K.height, K.width), np.nan, np.float32)
+    assert estimate_target_pose(160.0, 120.0, depth, K) is None
+    assert estimate_target_pose(160.0, 120.0, np.zeros_like(depth), K) is None
+    assert estimate_target_pose(160.0, 120.0, np.full_like(depth, np.inf), K) is None
+    assert estimate_target_pose(-50.0, 120.0, np.ones_like(depth), K) is None
+
+
+def test_covariance_matches_scatter_of_estimates():
+    """Predicted tilt and range variances agree with Monte-Carlo ones within a factor 2."""
+    rng = np.random.default_rng(9)
+    depth0, u, v, p, n = _plane_scene(rng)
+    tilts, ranges, covs = [], [], []
+    for _ in range(60):
+        est = estimate_target_pose(u, v, depth0 + rng.normal(0, 0.004, depth0.shape)
+                                   .astype(np.float32), K, pixel_sigma_px=0.0)
+        tilts.append(np.cross(n, est[1]))
+        ranges.append(np.linalg.norm(est[0]))
+        covs.append(est[2])
+    cov = np.mean(covs, axis=0)
+    assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > -1e-12)
+    tilt_var_pred = np.trace(cov[3:, 3:]) - UNOBSERVED_VAR_RAD2
+    tilt_var_mc = np.sum(np.var(tilts, axis=0))
+    assert 0.5 < tilt_var_pred / tilt_var_mc < 2.0
+    ray = p / np.linalg.norm(p)
+    assert 0.5 < (ray @ cov[:3, :3] @ ray) / np.var(ranges) < 2.0
+    assert cov[3:, 3:] @ n @ n == pytest.approx(UNOBSERVED_VAR_RAD2, rel=1e-3)
+
+
+@pytest.mark.parametrize('n', [(0.0, 0.0, -1.0), (0.3, -0.2, -0.9), (1.0, 0.0, 0.0),
+                               (-0.99, 0.1, 0.0)])
+def test_quaternion_z_axis_is_normal(n):
+    n = np.asarray(n) / np.linalg.norm(n)
+    q = pose_quaternion_from_normal(n)
+    assert np.linalg.norm(q) == pytest.approx(1.0)
+    r = Rotation.from_quat(q).as_matrix()
+    assert np.allclose(r[:, 2], n, atol=1e-12)
+    assert np.allclose(pose_quaternion_from_normal(n), q)
+    if abs(n[0]) < 0.9:
+        assert r[0, 0] > 0.0  # x axis follows the camera's x (right)
+
+
+def test_facing_plane_frame_is_right_up_out():
+    r = Rotation.from_quat(pose_quaternion_from_normal([0.0, 0.0, -1.0])).as_matrix()
+    # Optical frame: x right, y down; the target frame's y is "up" = -y_cam.
+    assert np.allclose(r, [[1, 0, 0], [0, -1, 0], [0, 0, -1]], atol=1e-12)
