@@ -26,12 +26,18 @@ class CameraConfig:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
 
+# TinyRenderer's image rows come out one pixel above the pinhole model's (measured by
+# test_camera), while columns match; the projection compensates.
+ROW_OFFSET_PX = 1.0
+
+
 def projection_matrix(cam):
-    """OpenGL projection (column-major, 16 floats) reproducing the pinhole model exactly."""
+    """OpenGL projection (column-major, 16 floats) reproducing the pinhole model K."""
     w, h, n, f = cam.width, cam.height, cam.near_m, cam.far_m
+    cy = cam.cy + ROW_OFFSET_PX
     m = np.array([
         [2 * cam.fx / w, 0.0, 1.0 - 2 * cam.cx / w, 0.0],
-        [0.0, 2 * cam.fy / h, 2 * cam.cy / h - 1.0, 0.0],
+        [0.0, 2 * cam.fy / h, 2 * cy / h - 1.0, 0.0],
         [0.0, 0.0, -(f + n) / (f - n), -2 * f * n / (f - n)],
         [0.0, 0.0, -1.0, 0.0],
     ])

@@ -13,8 +13,13 @@ def _control(seconds):
     return bench_control(duration_s=seconds)
 
 
+def _vision(seconds):
+    from uav_tilt_tools.bench_vision import bench_vision
+    return bench_vision(seconds)
+
+
 # Imported on demand: the sim bench need not load torch or the controller.
-BENCHES = {'sim': _sim, 'control': _control}
+BENCHES = {'sim': _sim, 'control': _control, 'vision': _vision}
 
 
 def register(sub):
@@ -22,7 +27,7 @@ def register(sub):
     parser = sub.add_parser('bench', help='speed measurements, one JSON object on stdout')
     parser.add_argument('what', choices=sorted(BENCHES))
     parser.add_argument('--seconds', type=float, default=None,
-                        help='length of each measurement (default: 10 s sim, 30 s control)')
+                        help='length of each measurement (default: 30 s control, else 10 s)')
     parser.set_defaults(func=run)
 
 
@@ -31,7 +36,7 @@ def run(args):
     # Benches start node processes: keep them local and away from a running system.
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
-    defaults = {'sim': 10.0, 'control': 30.0}
+    defaults = {'sim': 10.0, 'control': 30.0, 'vision': 10.0}
     seconds = args.seconds if args.seconds is not None else defaults[args.what]
     print(json.dumps(BENCHES[args.what](seconds)))
     return 0

@@ -1,0 +1,96 @@
+"""`uav-tilt bench vision`: detector and pipeline speed on CPU (DESIGN section 7).
+
+reference_ms_p50: fp32 YOLOv3-tiny (reference widths, untrained: only speed matters) at
+the same 320x256 input; detector_ms_p50: the deployed model on its backend; speedup:
+their ratio in the same run; pipeline_fps / pipeline_ms_p95: the whole
+VisionPipeline.process on frames rendered by the plant while the vehicle drifts past the
+target. Torch and ONNX Runtime get 2 threads each (the Jetson-class budget).
+"""
+import time
+
+import numpy as np
+import torch
+
+from uav_tilt_common.vehicle import GRAVITY
+from uav_tilt_sim.plant import Plant, PlantCoreConfig
+from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_sim.textures import OBJECT_CLASSES
+from uav_tilt_vision.backends import OnnxDetector
+from uav_tilt_vision.detector import Detector
+from uav_tilt_vision.pipeline import VisionPipeline
+from uav_tilt_vision.target_pose import CameraIntrinsics
+from uav_tilt_vision.vision_node import VisionNodeConfig, open_detector
+
+THREADS = 2
+N_FRAMES = 60           # two seconds of camera frames
+WARMUP = 3
+
+
+def rendered_frames(n=N_FRAMES):
+    """(intrinsics, [(rgb, depth, t_s)]): the vehicle hovers 1 m before the default target
+    and drifts sideways at ~0.1 m/s."""
+    scenario = load_scenario()
+    scenario.start_xyz_m = [1.38, 0.0, 1.43]
+    plant = Plant(PlantCoreConfig(), scenario, render=True)
+    try:
+        hover = np.full(4, plant.mass_kg * GRAVITY / 4)
+        plant.set_actuator_state(hover, 0.0, 0.0)
+        plant.external_force_map = np.array([0.0, 0.1 * plant.mass_kg, 0.0])
+        every = round(plant.config.control_hz / plant.config.camera.rate_hz)
+        frames = []
+        for _ in range(n):
+            for _ in range(every):
+                plant.step()
+            rgb, depth, _ = plant.render()
+            frames.append((rgb, depth, plant.t_s))
+        cam = plant.config.camera
+        return CameraIntrinsics(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height), frames
+    finally:
+        plant.close()
+
+
+def time_ms(fn, inputs, seconds):
+    """Milliseconds per call of ``fn`` over ``inputs`` (cycled) for about ``seconds``."""
+    for x in inputs[:WARMUP]:
+        fn(x)
+    out, start, k = [], time.perf_counter(), 0
+    while not out or (time.perf_counter() - start < seconds and len(out) < 10 * len(inputs)):
+        x = inputs[k % len(inputs)]
+        t0 = time.perf_counter()
+        fn(x)
+        out.append((time.perf_counter() - t0) * 1e3)
+        k += 1
+    return np.array(out)
+
+
+def bench_vision(seconds=10.0, model_path=None, backend=None):
+    """JSON-ready dict of DESIGN section 7's vision keys, plus the backend and model used."""
+    torch.set_num_threads(THREADS)
+    cfg = VisionNodeConfig()
+    detector, note = open_detector(model_path or cfg.model_path, backend or cfg.backend)
+    if isinstance(detector, OnnxDetector):
+        detector = OnnxDetector(detector.model_path, threads=THREADS)
+    K, frames = rendered_frames()
+    images = [rgb for rgb, _, _ in frames]
+    share = seconds / 3.0
+    reference = Detector(num_classes=len(OBJECT_CLASSES)).eval()
+    ref_ms = time_ms(lambda img: reference.predict(img), images, share)
+    result = {'reference_ms_p50': float(np.median(ref_ms)), 'detector_ms_p50': None,
+              'speedup': None, 'backend': 'none', 'model': None, 'note': note}
+    if detector is not None:
+        det_ms = time_ms(detector.predict, images, share)
+        result.update(detector_ms_p50=float(np.median(det_ms)),
+                      speedup=float(np.median(ref_ms) / np.median(det_ms)),
+                      backend=detector.backend, model=detector.model_path)
+    # Each pass restarts the detect/track schedule on the same sequence.
+    pipe_ms = []
+    start = time.perf_counter()
+    while not pipe_ms or time.perf_counter() - start < share:
+        pipeline = VisionPipeline(detector, K, cfg)
+        for rgb, depth, t_s in frames:
+            t0 = time.perf_counter()
+            pipeline.process(rgb, depth, t_s)
+            pipe_ms.append((time.perf_counter() - t0) * 1e3)
+    result.update(pipeline_fps=float(1e3 / np.mean(pipe_ms)),
+                  pipeline_ms_p95=float(np.percentile(pipe_ms, 95)))
+    return result

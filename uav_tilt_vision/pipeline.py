@@ -1,0 +1,169 @@
+"""Per-frame vision pipeline of article sec. 3.2: detect, track, POI, target pose. No rclpy.
+
+Every ``detect_every`` frames (and whenever the track is lost or its quality drops) the
+CNN detector picks the highest-scoring target-class box; in between, the KLT tracker
+carries that box. Inside the box the POI (bolt head) is found by morphology, and the
+depth image around it gives the 3D point, the surface normal and their covariance in
+the camera optical frame.
+"""
+import contextlib
+import dataclasses
+import time
+
+import cv2
+import numpy as np
+
+from uav_tilt_common.config import nested, param
+from uav_tilt_sim.textures import OBJECT_CLASSES
+from uav_tilt_vision.klt_tracker import KltBoxTracker, KltConfig
+from uav_tilt_vision.poi import find_poi
+from uav_tilt_vision.target_pose import estimate_target_pose, pose_quaternion_from_normal
+
+STAGES = ('detector', 'tracker', 'poi', 'pose')
+
+
+@dataclasses.dataclass
+class VisionConfig:
+    """Parameters of :class:`VisionPipeline`."""
+
+    detect_every: int = param(5, lo=1, hi=1000)
+    conf_thres: float = param(0.25, lo=0.0, hi=1.0)
+    iou_thres: float = param(0.45, lo=0.0, hi=1.0)
+    target_class: str = param('bolt_plate', choices=OBJECT_CLASSES)
+    min_track_quality: float = param(0.5, lo=0.0, hi=1.0)   # below: re-detect this frame
+    pose_window_px: int = param(10, lo=2, hi=50)            # half side of the plane-fit window
+    pixel_sigma_px: float = param(0.5, lo=0.01, hi=10.0)    # POI pixel noise (covariance)
+    klt: KltConfig = nested(KltConfig)
+
+
+@dataclasses.dataclass
+class FrameResult:
+    """What the pipeline made of one frame (camera optical frame, metres)."""
+
+    stamp_s: float
+    found: bool = False
+    p_cam: np.ndarray = None        # POI position
+    q_cam: np.ndarray = None        # (x, y, z, w) of the target frame, z = surface normal
+    covariance: np.ndarray = None   # 6x6: x, y, z, rot x, rot y, rot z
+    box_xyxy: np.ndarray = None     # target box (detected or tracked), image pixels
+    poi_px: tuple = None            # (u, v)
+    detected: bool = False          # the detector ran on this frame
+    tracked: bool = False           # the box came from the tracker
+    track_points: np.ndarray = None  # (N, 2) KLT points after this frame
+    timings_ms: dict = dataclasses.field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+
+
+class VisionPipeline:
+    """Stateful per-frame processing; ``detector.predict(rgb) -> (N, 6)`` or None (no model)."""
+
+    def __init__(self, detector, intrinsics, config=None):
+        self.detector = detector
+        self.intrinsics = intrinsics
+        self.config = config or VisionConfig()
+        self.target_class = OBJECT_CLASSES.index(self.config.target_class)
+        self.tracker = KltBoxTracker(self.config.klt)
+        self._since_detect = self.config.detect_every   # detect on the first frame
+
+    def process(self, rgb, depth_m, stamp_s):
+        """One frame: uint8 RGB (H, W, 3) and depth (H, W) metres -> :class:`FrameResult`."""
+        res = FrameResult(stamp_s)
+        gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+        box = self._track(gray, res) if self._since_detect < self.config.detect_every else None
+        if box is None:
+            box = self._detect(rgb, gray, res)
+        self._since_detect += 1
+        if box is None:
+            return res
+        res.box_xyxy = box
+        res.track_points = self.tracker.points
+        with _timer(res, 'poi'):
+            poi = find_poi(rgb, box)
+        if poi is None:
+            return res
+        res.poi_px = poi[:2]
+        with _timer(res, 'pose'):
+            est = estimate_target_pose(poi[0], poi[1], depth_m, self.intrinsics,
+                                       self.config.pose_window_px, self.config.pixel_sigma_px)
+            if est is not None:
+                res.p_cam, n_cam, res.covariance = est
+                res.q_cam = pose_quaternion_from_normal(n_cam)
+                res.found = True
+        return res
+
+    def _track(self, gray, res):
+        """The tracked box, or None when lost or of too low quality (then: re-detect)."""
+        if self.tracker.lost:
+            return None
+        with _timer(res, 'tracker'):
+            box, quality = self.tracker.update(gray)
+        if box is None or quality < self.config.min_track_quality or not _on_image(box, gray):
+            return None
+        res.tracked = True
+        return box
+
+    def _detect(self, rgb, gray, res):
+        """Run the detector; start tracking its best target box. None without one."""
+        self._since_detect = 0
+        res.detected = self.detector is not None
+        box = None
+        if self.detector is not None:
+            with _timer(res, 'detector'):
+                dets = np.asarray(self.detector.predict(rgb, self.config.conf_thres,
+                                                        self.config.iou_thres))
+            mine = dets[dets[:, 5].astype(int) == self.target_class] if len(dets) else dets
+            if len(mine):
+                box = mine[np.argmax(mine[:, 4]), :4].astype(np.float64)
+        self.tracker = KltBoxTracker(self.config.klt)    # nothing tracked without a box
+        if box is not None:
+            with _timer(res, 'tracker'):
+                self.tracker.init(gray, box)
+        return box
+
+
+def check_frame(rgb, depth_m, intrinsics):
+    """Why a frame cannot be processed (a short reason), or None when it can."""
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+        return 'rgb_format'
+    if rgb.size == 0 or depth_m.size == 0:
+        return 'empty'
+    size = (intrinsics.height, intrinsics.width)
+    if rgb.shape[:2] != size or depth_m.shape != size:
+        return 'size'
+    if not np.isfinite(depth_m).any():
+        return 'depth_invalid'
+    return None
+
+
+def draw_debug(rgb, result):
+    """Copy of ``rgb`` with the box (green: detected, yellow: tracked), KLT points, POI."""
+    img = np.ascontiguousarray(rgb).copy()
+    if result.box_xyxy is not None:
+        x0, y0, x1, y1 = (int(round(c)) for c in result.box_xyxy)
+        colour = (255, 220, 0) if result.tracked else (0, 230, 0)
+        cv2.rectangle(img, (x0, y0), (x1, y1), colour, 1)
+    if result.track_points is not None:
+        for u, v in result.track_points:
+            cv2.circle(img, (int(round(u)), int(round(v))), 1, (0, 160, 255), -1)
+    if result.poi_px is not None:
+        u, v = (int(round(c)) for c in result.poi_px)
+        cv2.drawMarker(img, (u, v), (255, 0, 0), cv2.MARKER_CROSS, 9, 1)
+    if result.found:
+        cv2.putText(img, f'{result.p_cam[2]:.2f} m', (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                    (255, 0, 0), 1, cv2.LINE_AA)
+    return img
+
+
+def _on_image(box, gray):
+    """The box still overlaps the image by at least half its area."""
+    h, w = gray.shape
+    x0, y0, x1, y1 = box
+    inter = max(min(x1, w) - max(x0, 0), 0) * max(min(y1, h) - max(y0, 0), 0)
+    return inter >= 0.5 * (x1 - x0) * (y1 - y0)
+
+
+@contextlib.contextmanager
+def _timer(res, stage):
+    """Adds the wall time of a ``with`` block to ``res.timings_ms[stage]``."""
+    t0 = time.perf_counter()
+    yield
+    res.timings_ms[stage] += (time.perf_counter() - t0) * 1e3
