@@ -1,0 +1,105 @@
+"""Inference backends behind one interface: ``load_detector(model_path, backend)``.
+
+'torch' runs a ``Detector`` checkpoint (fp32 or pruned ``.pt``); 'onnxruntime' runs the
+int8 QDQ ``.onnx`` written by ``compress`` (raw heads; decoding and NMS are shared with
+the torch path). When the asked backend cannot run (onnxruntime not installed, or a
+``.pt`` asked of it), the loader falls back to torch on the ONNX model's source
+checkpoint and says so in ``backend`` and ``note``, so a node logs one honest line.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from uav_tilt_vision.boxes import decode, letterbox
+from uav_tilt_vision.detector import STRIDES, load_model, postprocess
+
+BACKENDS = ('torch', 'onnxruntime')
+
+
+def _as_list(images):
+    single = isinstance(images, np.ndarray) and images.ndim == 3
+    return [images] if single else list(images), single
+
+
+class TorchDetector:
+    """A ``Detector`` checkpoint on CPU."""
+
+    backend = 'torch'
+
+    def __init__(self, model_path, note=''):
+        self.model = load_model(model_path)
+        self.model_path, self.note = str(model_path), note
+        self.num_classes = self.model.num_classes
+
+    def predict(self, images, conf_thres=0.25, iou_thres=0.45):
+        """(N, 6) [x1, y1, x2, y2, score, class] in image pixels; a list in -> a list out."""
+        images, single = _as_list(images)
+        out = self.model.predict(images, conf_thres, iou_thres)
+        return out[0] if single else out
+
+
+class OnnxDetector:
+    """An ONNX model of the raw detector heads in ONNX Runtime (CPU)."""
+
+    backend = 'onnxruntime'
+
+    def __init__(self, model_path, threads=0):
+        import onnxruntime as ort
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = threads
+        self.session = ort.InferenceSession(str(model_path), opts,
+                                            providers=['CPUExecutionProvider'])
+        meta = json.loads(self.session.get_modelmeta().custom_metadata_map['detector'])
+        self.anchors = torch.tensor(meta['anchors'], dtype=torch.float32)
+        self.img_size = tuple(meta['img_size'])
+        self.num_classes = meta['num_classes']
+        self.model_path, self.note = str(model_path), ''
+        self.input_name = self.session.get_inputs()[0].name
+
+    def predict(self, images, conf_thres=0.25, iou_thres=0.45):
+        """(N, 6) [x1, y1, x2, y2, score, class] in image pixels; a list in -> a list out."""
+        images, single = _as_list(images)
+        boxes = [letterbox(img, self.img_size) for img in images]
+        x = np.stack([b[0] for b in boxes]).transpose(0, 3, 1, 2).astype(np.float32) / 255.0
+        heads = self.session.run(None, {self.input_name: x})
+        dets = torch.cat([decode(torch.from_numpy(h), a, s)
+                          for h, a, s in zip(heads, self.anchors, STRIDES)], 1).numpy()
+        out = [postprocess(d, conf_thres, iou_thres, 100, s, p, img.shape)
+               for d, (_, s, p), img in zip(dets, boxes, images)]
+        return out[0] if single else out
+
+
+def onnx_source(model_path):
+    """The checkpoint an ONNX model was exported from (recorded in its metadata)."""
+    import onnx
+    props = {p.key: p.value for p in onnx.load(str(model_path)).metadata_props}
+    return Path(model_path).parent / json.loads(props['detector'])['source']
+
+
+def load_detector(model_path, backend='auto'):
+    """A detector with ``predict(rgb) -> (N, 6)``, ``backend`` (the one used) and ``note``.
+
+    ``backend``: 'torch', 'onnxruntime', or 'auto' (by the file suffix).
+    """
+    path = Path(model_path)
+    is_onnx = path.suffix == '.onnx'
+    if backend == 'auto':
+        backend = 'onnxruntime' if is_onnx else 'torch'
+    if backend not in BACKENDS:
+        raise ValueError(f'unknown backend {backend!r}; expected one of {BACKENDS}')
+    if backend == 'onnxruntime' and is_onnx:
+        try:
+            return OnnxDetector(path)
+        except ImportError as exc:
+            reason = f'onnxruntime unavailable ({exc})'
+    elif backend == 'onnxruntime':
+        reason = f'{path.name} is not an ONNX model'
+    elif not is_onnx:
+        return TorchDetector(path)
+    else:
+        reason = 'torch cannot run an ONNX model'
+    source = onnx_source(path) if is_onnx else path
+    return TorchDetector(source, note=f'{reason}: fell back to torch on {source.name}')
