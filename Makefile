@@ -3,7 +3,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: venv test lint bench clean
+.PHONY: venv test lint bench demo clean
 
 venv: $(STAMP)
 
@@ -23,6 +23,14 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(VENV)/bin/uav-tilt bench sim
+
+# The inspection mission with vision in the loop (lockstep, headless), recorded to
+# runs/<stamp>/; the report runs even after a failure, and either failing fails the demo.
+demo: $(STAMP)
+	@run=runs/$$(date +%Y%m%d-%H%M%S); \
+	scripts/launch.sh --mission inspect --record $$run; launched=$$?; \
+	$(VENV)/bin/uav-tilt report $$run; reported=$$?; \
+	[ $$launched -eq 0 ] && [ $$reported -eq 0 ]
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info

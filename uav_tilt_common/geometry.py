@@ -3,6 +3,8 @@
 Body frame ``base_link`` is FLU. The article's frame P has x_P right, y_P forward, z_P up,
 so a vector converts as v_FLU = (v_P.y, -v_P.x, v_P.z).
 """
+import math
+
 import numpy as np
 
 # Spin sign s_i of each rotor: reaction torque s_i * k * F_i about its own thrust axis.
@@ -85,3 +87,101 @@ def quat_to_matrix(q):
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
     ])
+
+
+# Per-tick single-rotation helpers: scipy's Rotation costs 20-100 us per call through its
+# array-API layer, these a few us. Quaternions are (x, y, z, w) like scipy's; results match
+# scipy's Rotation to rounding.
+
+
+def cross3(a, b):
+    """Cross product of two 3-vectors (np.cross costs ~20 us per call)."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
+def matrix_to_quat(R):
+    """Unit quaternion of a rotation matrix, as scipy's ``Rotation.from_matrix.as_quat``."""
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = np.asarray(R, dtype=float).tolist()
+    trace = m00 + m11 + m22
+    decision = (m00, m11, m22, trace)
+    # Shepperd's method, branch on the largest of the same four values as scipy
+    choice = decision.index(max(decision))
+    if choice == 0:
+        q = (1.0 - trace + 2.0 * m00, m10 + m01, m20 + m02, m21 - m12)
+    elif choice == 1:
+        q = (m10 + m01, 1.0 - trace + 2.0 * m11, m21 + m12, m02 - m20)
+    elif choice == 2:
+        q = (m20 + m02, m21 + m12, 1.0 - trace + 2.0 * m22, m10 - m01)
+    else:
+        q = (m21 - m12, m02 - m20, m10 - m01, 1.0 + trace)
+    return np.array(q) / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+
+
+def quat_multiply(p, q):
+    """Hamilton product p * q: the rotation q followed by p (scipy's ``Rotation * ``)."""
+    px, py, pz, pw = p
+    qx, qy, qz, qw = q
+    return np.array([pw * qx + qw * px + py * qz - pz * qy,
+                     pw * qy + qw * py + pz * qx - px * qz,
+                     pw * qz + qw * pz + px * qy - py * qx,
+                     pw * qw - px * qx - py * qy - pz * qz])
+
+
+def quat_to_rotvec(q):
+    """Rotation vector (angle in [0, pi]) of a unit quaternion, as scipy's ``as_rotvec``."""
+    x, y, z, w = (float(c) for c in q)
+    if w < 0.0 or (w == 0.0 and (x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0))))):
+        x, y, z, w = -x, -y, -z, -w
+    angle = 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), w)
+    if angle <= 1e-3:
+        # Taylor series of angle / sin(angle / 2), which is 0 / 0 at zero
+        angle2 = angle * angle
+        scale = 2.0 + angle2 / 12.0 + 7.0 * angle2 * angle2 / 2880.0
+    else:
+        scale = angle / math.sin(angle / 2.0)
+    return np.array([scale * x, scale * y, scale * z])
+
+
+def rotvec_to_quat(v):
+    """Unit quaternion of a rotation vector, as scipy's ``from_rotvec.as_quat``."""
+    x, y, z = (float(c) for c in v)
+    angle = math.sqrt(x * x + y * y + z * z)
+    if angle <= 1e-3:
+        # Taylor series of sin(angle / 2) / angle
+        angle2 = angle * angle
+        scale = 0.5 - angle2 / 48.0 + angle2 * angle2 / 3840.0
+    else:
+        scale = math.sin(angle / 2.0) / angle
+    return np.array([scale * x, scale * y, scale * z, math.cos(angle / 2.0)])
+
+
+def quat_slerp(q0, q1, u):
+    """Unit quaternion a fraction ``u`` of the way from q0 to q1 along the shortest arc."""
+    x, y, z, w = q0
+    relative = quat_multiply((-x, -y, -z, w), q1)
+    return quat_multiply(q0, rotvec_to_quat(u * quat_to_rotvec(relative)))
+
+
+def euler_zyx_to_matrix(yaw_rad, pitch_rad, roll_rad):
+    """R = Rz(yaw) Ry(pitch) Rx(roll), scipy's intrinsic 'ZYX' Euler angles."""
+    cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
+    cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
+    cr, sr = math.cos(roll_rad), math.sin(roll_rad)
+    return np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ])
+
+
+def matrix_to_euler_zyx(R):
+    """(yaw, pitch, roll) of R = Rz(yaw) Ry(pitch) Rx(roll); away from pitch = +-pi/2 these
+    are scipy's ``as_euler('ZYX')``, at it roll is 0 as in scipy."""
+    (m00, _, _), (m10, m11, m12), (m20, m21, m22) = np.asarray(R, dtype=float).tolist()
+    pitch = -math.asin(min(max(m20, -1.0), 1.0))
+    if math.hypot(m00, m10) < 1e-12:
+        # gimbal lock: only yaw -+ roll is defined
+        return math.atan2(m12 * math.copysign(1.0, -m20), m11), pitch, 0.0
+    return math.atan2(m10, m00), pitch, math.atan2(m21, m22)

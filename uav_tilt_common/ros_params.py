@@ -2,6 +2,7 @@
 import sys
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 
 from uav_tilt_common.config import ConfigError, from_dict, to_flat
@@ -39,6 +40,10 @@ def run_node(node_factory, args=None):
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:
+        # A callback that publishes while a signal shuts the context down is not an error.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

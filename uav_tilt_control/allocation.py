@@ -6,6 +6,7 @@ For a fixed tilt the four thrusts are linear in (F_total, tau_x_P, tau_y_P, tau_
 saturation handling (give up yaw, then roll/pitch, then clip) is closed form too.
 """
 import dataclasses
+import math
 
 import numpy as np
 
@@ -56,8 +57,8 @@ class Allocator:
         torque = _sanitize(torque_flu, 3)
         fx, fz = force_xz
         f_total, tilt_rad = _total_and_tilt(fx, fz, v.tilt_limit_rad)
-        f_total = float(np.clip(f_total, 4.0 * f_lo, 4.0 * f_hi))
-        s, c = np.sin(tilt_rad), np.cos(tilt_rad)
+        f_total = min(max(float(f_total), 4.0 * f_lo), 4.0 * f_hi)
+        s, c = math.sin(tilt_rad), math.cos(tilt_rad)
 
         tau_p = flu_to_p(torque)
         base = np.full(4, f_total / 4.0)
@@ -72,7 +73,7 @@ class Allocator:
         force_lost = force_xz - force_got[[0, 2]]
         torque_lost = torque - torque_got
         saturated = bool(rp_scale < 1.0 or yaw_scale < 1.0
-                         or not np.allclose(force_lost, 0.0, atol=1e-9 * (1.0 + f_total)))
+                         or not (np.abs(force_lost) <= 1e-9 * (1.0 + f_total)).all())
         return AllocationResult(thrusts, tilt_rad, tilt_rad, saturated, force_lost, torque_lost)
 
     def _thrusts_from_torque_p(self, tau_x_p, tau_y_p, tau_z_p, s, c):
@@ -80,10 +81,13 @@ class Allocator:
         l1, l2, k = self.vehicle.l1_m, self.vehicle.l2_m, self.vehicle.k_m
         # eq. (2a): front sum minus rear sum; the total stays unchanged.
         front_minus_rear = tau_x_p / (l2 * c)
-        # eq. (2b, 2c) in (d1, d2) = (F1 - F4, F2 - F3); determinant -2 l1 k, never singular.
-        a = np.array([[c * l1 + s * k, c * l1 - s * k],
-                      [-(s * l1 - c * k), -(s * l1 + c * k)]])
-        d1, d2 = np.linalg.solve(a, [tau_y_p, tau_z_p])
+        # eq. (2b, 2c) in (d1, d2) = (F1 - F4, F2 - F3); determinant -2 l1 k, never singular,
+        # so Cramer's rule (np.linalg.solve costs more than the rest of the 2x2 solve).
+        a11, a12 = c * l1 + s * k, c * l1 - s * k
+        a21, a22 = -(s * l1 - c * k), -(s * l1 + c * k)
+        det = a11 * a22 - a12 * a21
+        d1 = (tau_y_p * a22 - a12 * tau_z_p) / det
+        d2 = (a11 * tau_z_p - a21 * tau_y_p) / det
         front, rear = front_minus_rear / 2.0, -front_minus_rear / 2.0
         return 0.5 * np.array([front + d1, rear + d2, rear - d2, front - d1])
 
@@ -92,7 +96,7 @@ def _sanitize(values, n):
     """Finite, bounded float array of length n (non-finite entries become 0)."""
     arr = np.asarray(values, dtype=float).reshape(n)
     arr = np.where(np.isfinite(arr), arr, 0.0)
-    return np.clip(arr, -_INPUT_BOUND, _INPUT_BOUND)
+    return np.minimum(np.maximum(arr, -_INPUT_BOUND), _INPUT_BOUND)
 
 
 def _total_and_tilt(fx, fz, tilt_limit_rad):
@@ -100,18 +104,18 @@ def _total_and_tilt(fx, fz, tilt_limit_rad):
     if fz <= 0.0:
         # Thrust cannot point down: no force, and no reason to move the servos.
         return 0.0, 0.0
-    tilt_rad = float(np.arctan2(fx, fz))
+    tilt_rad = math.atan2(fx, fz)
     if abs(tilt_rad) <= tilt_limit_rad:
-        return float(np.hypot(fx, fz)), tilt_rad
+        return math.hypot(fx, fz), tilt_rad
     # Beyond the tilt limit keep the vertical component, which holds altitude.
-    tilt_rad = float(np.clip(tilt_rad, -tilt_limit_rad, tilt_limit_rad))
-    return fz / np.cos(tilt_rad), tilt_rad
+    tilt_rad = min(max(tilt_rad, -tilt_limit_rad), tilt_limit_rad)
+    return fz / math.cos(tilt_rad), tilt_rad
 
 
 def _max_feasible_scale(base, delta, lo, hi):
     """Largest s in [0, 1] with lo <= base + s * delta <= hi (base assumed feasible)."""
     scale = 1.0
-    for b, d in zip(base, delta):
+    for b, d in zip(base.tolist(), delta.tolist()):
         if d > 0.0 and b + d > hi:
             scale = min(scale, (hi - b) / d)
         elif d < 0.0 and b + d < lo:

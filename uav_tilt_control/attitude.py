@@ -5,12 +5,14 @@ the roll that puts the commanded force in the x_FLU-z_FLU plane (DESIGN section 
 part is then made by tilting the arms, not by pitching.
 """
 import dataclasses
+import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import param
+from uav_tilt_common.geometry import cross3, euler_zyx_to_matrix, matrix_to_quat, quat_to_rotvec
 from uav_tilt_common.state import VehicleState
+from uav_tilt_control import frames
 
 
 @dataclasses.dataclass
@@ -35,13 +37,12 @@ def attitude_setpoint(force_map, yaw_rad, pitch_rad=0.0, roll_limit_rad=0.6):
     body frame. With |roll| at its limit the remaining y_FLU part is dropped.
     """
     force = np.asarray(force_map, dtype=float)
-    yaw_pitch = Rotation.from_euler('ZY', [yaw_rad, pitch_rad])
-    f_yp = yaw_pitch.inv().apply(force)
+    f_yp = euler_zyx_to_matrix(yaw_rad, pitch_rad, 0.0).T @ force
     # Rx(roll)^T f_yp has y = cos*f_y + sin*f_z = 0; the |f_z| choice keeps roll small (and
     # defined) when the force points down, where the rotors cannot follow anyway.
-    roll_rad = np.arctan2(-f_yp[1], abs(f_yp[2]))
-    roll_rad = float(np.clip(roll_rad, -roll_limit_rad, roll_limit_rad))
-    R_map_base_d = Rotation.from_euler('ZYX', [yaw_rad, pitch_rad, roll_rad]).as_matrix()
+    roll_rad = math.atan2(-f_yp[1], abs(f_yp[2]))
+    roll_rad = min(max(roll_rad, -roll_limit_rad), roll_limit_rad)
+    R_map_base_d = euler_zyx_to_matrix(yaw_rad, pitch_rad, roll_rad)
     f_body = R_map_base_d.T @ force
     return R_map_base_d, float(f_body[0]), float(f_body[2])
 
@@ -56,6 +57,15 @@ class AttitudePid:
     def __init__(self, inertia_kgm2, config: AttitudeConfig = None):
         self.config = config or AttitudeConfig()
         self.inertia = np.asarray(inertia_kgm2, dtype=float)
+        # the per-axis gains as arrays once, not per tick (the configuration is fixed)
+        cfg = self.config
+        self._att_p = np.asarray(cfg.att_p, dtype=float)
+        self._rate_limit = np.asarray(cfg.rate_limit_rad_s, dtype=float)
+        self._rate_p = np.asarray(cfg.rate_p, dtype=float)
+        self._rate_i = np.asarray(cfg.rate_i, dtype=float)
+        self._rate_d = np.asarray(cfg.rate_d, dtype=float)
+        self._i_limit = np.asarray(cfg.rate_i_limit, dtype=float)
+        self._accel_limit = np.asarray(cfg.accel_limit, dtype=float)
         self.reset()
 
     def reset(self):
@@ -67,29 +77,28 @@ class AttitudePid:
     def update(self, R_map_base_d, state: VehicleState, dt_s):
         """One control tick; returns the body torque (FLU, N m)."""
         cfg = self.config
-        R_map_base = Rotation.from_quat(state.q_map_base)
+        R_map_base = frames.quat_matrix(state.q_map_base)
         # Error rotation expressed in the body: R_base_base_d as a rotation vector.
-        err_rotvec = (R_map_base.inv() * Rotation.from_matrix(R_map_base_d)).as_rotvec()
-        limit = np.asarray(cfg.rate_limit_rad_s)
-        rate_sp = np.clip(np.asarray(cfg.att_p) * err_rotvec, -limit, limit)
+        err_rotvec = quat_to_rotvec(matrix_to_quat(R_map_base.T @ R_map_base_d))
+        limit = self._rate_limit
+        rate_sp = np.minimum(np.maximum(self._att_p * err_rotvec, -limit), limit)
 
         rate = np.asarray(state.w_base, dtype=float)
         if self._rate_prev is not None:
             raw = (rate - self._rate_prev) / dt_s
-            blend = 1.0 - np.exp(-2.0 * np.pi * cfg.d_cutoff_hz * dt_s)
+            blend = 1.0 - math.exp(-2.0 * math.pi * cfg.d_cutoff_hz * dt_s)
             self._d_rate += blend * (raw - self._d_rate)
         self._rate_prev = rate.copy()
 
         rate_err = rate_sp - rate
-        accel = (np.asarray(cfg.rate_p) * rate_err + self.integral
-                 - np.asarray(cfg.rate_d) * self._d_rate)
-        accel_limit = np.asarray(cfg.accel_limit)
+        accel = self._rate_p * rate_err + self.integral - self._rate_d * self._d_rate
+        accel_limit = self._accel_limit
         saturated = np.abs(accel) >= accel_limit
         # Integrate only where the output is free, or where integrating unwinds it.
         unwinding = np.sign(rate_err) != np.sign(accel)
-        grow = np.where(~saturated | unwinding, np.asarray(cfg.rate_i) * rate_err * dt_s, 0.0)
-        i_limit = np.asarray(cfg.rate_i_limit)
-        self.integral = np.clip(self.integral + grow, -i_limit, i_limit)
-        accel = np.clip(accel, -accel_limit, accel_limit)
+        grow = np.where(~saturated | unwinding, self._rate_i * rate_err * dt_s, 0.0)
+        i_limit = self._i_limit
+        self.integral = np.minimum(np.maximum(self.integral + grow, -i_limit), i_limit)
+        accel = np.minimum(np.maximum(accel, -accel_limit), accel_limit)
         # Gyroscopic term so the gains act on a decoupled double integrator.
-        return self.inertia * accel + np.cross(rate, self.inertia * rate)
+        return self.inertia * accel + cross3(rate, self.inertia * rate)

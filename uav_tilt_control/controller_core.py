@@ -10,9 +10,9 @@ with the gyro.
 import dataclasses
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import nested, param
+from uav_tilt_common.geometry import quat_multiply, rotvec_to_quat
 from uav_tilt_common.state import ActuatorCommand, VehicleState
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import frames
@@ -48,6 +48,7 @@ class ControllerCore:
         self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z)
         self.estimator = TargetEstimator(cfg.estimator, *frames.camera_pose_in_base(vehicle))
         self._odom = None
+        self._R_map_base = None     # of the odometry, computed on first use
         self._q_blind = None
         self._ground_truth = None
         self._f_contact_map = np.zeros(3)
@@ -60,6 +61,7 @@ class ControllerCore:
     def on_odometry(self, state: VehicleState):
         """Mocap-like odometry (map -> base_link); also feeds the estimator's pose history."""
         self._odom = state
+        self._R_map_base = None
         self._q_blind = np.asarray(state.q_map_base, dtype=float)
         self.estimator.add_state(state)
 
@@ -68,7 +70,7 @@ class ControllerCore:
         force_ee = np.asarray(force_ee, dtype=float)
         if self._odom is None or not np.all(np.isfinite(force_ee)):
             return
-        self._f_contact_map = Rotation.from_quat(self._odom.q_map_base).apply(force_ee)
+        self._f_contact_map = self._odom_rotation() @ force_ee
 
     def on_target_measurement(self, stamp_s, p_cam, q_cam_t, covariance):
         """Vision ``target/pose`` in the camera optical frame; returns True when accepted."""
@@ -80,7 +82,7 @@ class ControllerCore:
         if not np.all(np.isfinite(q_cam_t)) or np.linalg.norm(q_cam_t) < 0.5:
             self.estimator.counters['rejected_nonfinite'] += 1
             return False
-        R_cam_t = Rotation.from_quat(q_cam_t).as_matrix()
+        R_cam_t = frames.quat_matrix(q_cam_t)
         return self.estimator.add_measurement(stamp_s, p_cam, R_cam_t, cov)
 
     def on_ground_truth_target(self, p_map, q_map_t):
@@ -91,7 +93,7 @@ class ControllerCore:
         if not (np.all(np.isfinite(p_map)) and np.all(np.isfinite(q_map_t))
                 and np.linalg.norm(q_map_t) > 0.5):
             return False
-        self._ground_truth = (p_map, Rotation.from_quat(q_map_t).as_matrix())
+        self._ground_truth = (p_map, frames.quat_matrix(q_map_t))
         return True
 
     # ---- services: each returns (ok, message) ----
@@ -150,19 +152,25 @@ class ControllerCore:
 
     # ---- helpers ----
 
+    def _odom_rotation(self):
+        """R_map_base of the newest odometry; shared by the F/T intake and the tick."""
+        if self._R_map_base is None:
+            self._R_map_base = frames.quat_matrix(self._odom.q_map_base)
+        return self._R_map_base
+
     def _normal_force(self, target):
         """Push on the wall along -normal [N] (positive pushing), from the F/T reading."""
         if target is not None:
             return float(self._f_contact_map @ target.normal_map)
         # no estimate: the tool axis stands for the normal
-        x_tool_map = Rotation.from_quat(self._odom.q_map_base).apply([1.0, 0.0, 0.0])
+        x_tool_map = self._odom_rotation()[:, 0]
         return float(-self._f_contact_map @ x_tool_map)
 
     def _blind(self, t_s, setpoint, gyro, dt_s):
         """(state, setpoint) for flying without odometry: only feed-forward acts, and never
         upwards, so the vehicle keeps descending until the ground stops it."""
-        self._q_blind = (Rotation.from_quat(self._q_blind)
-                         * Rotation.from_rotvec(gyro * dt_s)).as_quat()
+        # not renormalised here: every consumer of the attitude normalises it
+        self._q_blind = quat_multiply(self._q_blind, rotvec_to_quat(gyro * dt_s))
         p_map = setpoint.origin_map + setpoint.R_map_t @ setpoint.lambda_d_t
         v_map = setpoint.R_map_t @ setpoint.dlambda_d_t
         a_map = setpoint.R_map_t @ setpoint.ddlambda_d_t

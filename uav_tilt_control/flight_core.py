@@ -6,12 +6,14 @@ article's decoupling), so moving along x_FLU needs no pitching.
 """
 import dataclasses
 
+import math
+
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import nested
 from uav_tilt_common.state import ActuatorCommand, VehicleState
 from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control import frames
 from uav_tilt_control.allocation import AllocationConfig, Allocator
 from uav_tilt_control.attitude import AttitudeConfig, AttitudePid, attitude_setpoint
 from uav_tilt_control.impedance import ImpedanceConfig, ImpedanceController
@@ -56,7 +58,7 @@ class FlightCore:
                                                self.config.attitude.roll_limit_rad)
         # Split the force on the attitude actually flown, so the tilt makes the x_FLU part
         # right away while the attitude loop is still converging.
-        f_body = Rotation.from_quat(state.q_map_base).inv().apply(f_p_map)
+        f_body = frames.quat_matrix(state.q_map_base).T @ f_p_map
         torque_flu = self.attitude.update(R_map_base_d, state, dt_s)
         result = self.allocator.allocate(f_body[[0, 2]], torque_flu)
         command = ActuatorCommand(result.thrusts_n, result.alpha_rad, result.beta_rad)
@@ -78,7 +80,8 @@ def _inputs_finite(state, setpoint, f_contact_map, dt_s):
               setpoint.R_map_t, setpoint.origin_map, setpoint.lambda_d_t, setpoint.dlambda_d_t,
               setpoint.ddlambda_d_t, [setpoint.yaw_rad, setpoint.pitch_rad, dt_s]]
     try:
-        finite = all(np.all(np.isfinite(np.asarray(a, dtype=float))) for a in arrays)
+        flat = np.concatenate([np.asarray(a, dtype=float).ravel() for a in arrays])
+        q = np.asarray(state.q_map_base, dtype=float)
     except (TypeError, ValueError):
         return False
-    return finite and dt_s > 0.0 and np.linalg.norm(state.q_map_base) > 0.5
+    return bool(np.isfinite(flat).all()) and dt_s > 0.0 and math.sqrt(q @ q) > 0.5

@@ -3,8 +3,12 @@
 Rotations are 3x3 matrices R_a_b mapping vectors from frame b to frame a; positions p_a_b
 are the origin of b expressed in a.
 """
+import math
+
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from uav_tilt_common.geometry import cross3, quat_to_matrix
 
 # Optical axes (x right, y down, z forward) in FLU for a camera looking along +x_FLU.
 _R_FLU_OPTICAL = np.array([
@@ -32,8 +36,8 @@ def camera_pose_in_base(vehicle):
 def unit(v):
     """``v`` normalised; raises ValueError for a zero or non-finite vector."""
     v = np.asarray(v, dtype=float)
-    norm = np.linalg.norm(v)
-    if not np.isfinite(norm) or norm < 1e-12:
+    norm = math.sqrt(v @ v)
+    if not math.isfinite(norm) or norm < 1e-12:
         raise ValueError(f'cannot normalise {v!r}')
     return v / norm
 
@@ -46,26 +50,33 @@ def target_frame_from_normal(p_poi_map, normal_map):
     (projected on the surface).
     """
     z_t = unit(normal_map)
-    x_t = np.cross(_E_Z, z_t)
-    if np.linalg.norm(x_t) < _VERTICAL_EPS:
+    x_t = cross3(_E_Z, z_t)
+    if math.sqrt(x_t @ x_t) < _VERTICAL_EPS:
         x_t = np.array([1.0, 0.0, 0.0]) - z_t * z_t[0]
     x_t = unit(x_t)
-    y_t = np.cross(z_t, x_t)
+    y_t = cross3(z_t, x_t)
     return np.column_stack([x_t, y_t, z_t]), np.asarray(p_poi_map, dtype=float).copy()
 
 
 def yaw_facing(normal_map, default_rad=0.0):
     """Heading (rad, ENU) that points x_FLU into the wall, i.e. along -normal projected
     on the horizontal plane; ``default_rad`` when the normal is vertical."""
-    n = np.asarray(normal_map, dtype=float)
-    if np.hypot(n[0], n[1]) < _VERTICAL_EPS:
+    n0, n1 = float(normal_map[0]), float(normal_map[1])
+    if math.hypot(n0, n1) < _VERTICAL_EPS:
         return float(default_rad)
-    return float(np.arctan2(-n[1], -n[0]))
+    return math.atan2(-n1, -n0)
 
 
 def pitch_facing(normal_map):
     """Pitch (rad, positive nose down) that points x_FLU along -normal."""
-    return float(np.arcsin(np.clip(unit(normal_map)[2], -1.0, 1.0)))
+    return math.asin(min(max(float(unit(normal_map)[2]), -1.0), 1.0))
+
+
+def quat_matrix(q):
+    """Rotation matrix of a quaternion (x, y, z, w) of any norm, which scipy's from_quat
+    accepts too; a non-finite or zero one gives NaNs instead of raising."""
+    q = np.asarray(q, dtype=float)
+    return quat_to_matrix(q / math.sqrt(q @ q))
 
 
 def compose(R_a_b, p_a_b, R_b_c, p_b_c):
@@ -80,4 +91,4 @@ def to_frame(R_map_t, origin_map, p_map):
 
 def wrap_angle(a_rad):
     """Angle wrapped to [-pi, pi)."""
-    return float((a_rad + np.pi) % (2.0 * np.pi) - np.pi)
+    return float((a_rad + math.pi) % (2.0 * math.pi) - math.pi)

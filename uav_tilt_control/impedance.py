@@ -13,6 +13,7 @@ surface (:func:`contact_depth_for_force`). ``contact_feedforward = True`` restor
 article's literal (5) for comparison.
 """
 import dataclasses
+import math
 
 import numpy as np
 
@@ -62,6 +63,9 @@ class ImpedanceConfig:
     # the real weight, so a mass mismatch leaves no altitude offset. 0 disables it.
     hover_estimator_tau_s: float = param(2.0, lo=0.0, hi=100.0)
     hover_estimator_limit: float = param(0.3, lo=0.0, hi=1.0)   # fraction of nominal weight
+    # Learn only when the vertical error is quasi-static: a moving error is a manoeuvre,
+    # not a weight error (the integrator would wind up and overshoot).
+    hover_estimator_speed_m_s: float = param(0.05, lo=0.0, hi=10.0)
 
 
 def contact_depth_for_force(force_n, k_z_n_m):
@@ -80,6 +84,9 @@ class ImpedanceController:
     def __init__(self, mass_kg, config: ImpedanceConfig = None):
         self.mass_kg = float(mass_kg)
         self.config = config or ImpedanceConfig()
+        # the configuration is fixed once built, so the gains are too
+        self._gains = {contact: (self.config.contact if contact else self.config.free).k_c(
+            self.mass_kg) for contact in (False, True)}
         self.f_contact_map = np.zeros(3)
         self.f_hover_n = 0.0       # learnt weight correction, map z
 
@@ -90,8 +97,7 @@ class ImpedanceController:
 
     def gains(self, contact):
         """(K, C) diagonals of the contact or free-flight set."""
-        gains = self.config.contact if contact else self.config.free
-        return gains.k_c(self.mass_kg)
+        return self._gains[bool(contact)]
 
     def update(self, p_map, v_map, setpoint, f_contact_map, dt_s):
         """F_p in map [N] for the state (p, v in map) and an ``ImpedanceSetpoint``.
@@ -100,7 +106,7 @@ class ImpedanceController:
         low-pass filtered and only used with ``contact_feedforward``.
         """
         cfg = self.config
-        blend = 1.0 - np.exp(-2.0 * np.pi * cfg.contact_cutoff_hz * dt_s)
+        blend = 1.0 - math.exp(-2.0 * math.pi * cfg.contact_cutoff_hz * dt_s)
         self.f_contact_map = self.f_contact_map + blend * (
             np.asarray(f_contact_map, dtype=float) - self.f_contact_map)
 
@@ -113,26 +119,26 @@ class ImpedanceController:
         accel_t = np.asarray(setpoint.ddlambda_d_t, dtype=float) - (C * de_t + K * e_t) / (
             self.mass_kg)
         # A norm limit is frame independent, so the error dynamics stay the same in any t.
-        norm = np.linalg.norm(accel_t)
+        norm = math.sqrt(accel_t @ accel_t)
         if norm > cfg.accel_limit_mps2:
             accel_t *= cfg.accel_limit_mps2 / norm
-        self._estimate_hover(R_map_t @ e_t, K, setpoint.contact_gains, dt_s)
+        self._estimate_hover(R_map_t @ e_t, R_map_t @ de_t, K, setpoint.contact_gains, dt_s)
         f_gravity_map = np.array([0.0, 0.0, -self.mass_kg * GRAVITY - self.f_hover_n])
         f_p_map = -f_gravity_map + R_map_t @ (self.mass_kg * accel_t)
         if cfg.contact_feedforward:
             f_p_map -= self.f_contact_map
         return f_p_map
 
-    def _estimate_hover(self, e_map, K_t, contact, dt_s):
+    def _estimate_hover(self, e_map, de_map, K_t, contact, dt_s):
         """Integrate the vertical error into the weight estimate (free flight only).
 
         Frozen in contact, where a vertical share of the push on an inclined wall must stay
         the spring of eq. (6); horizontal axes keep their compliance: no integrator there.
         """
         tau = self.config.hover_estimator_tau_s
-        if tau <= 0.0 or contact:
+        if tau <= 0.0 or contact or abs(de_map[2]) > self.config.hover_estimator_speed_m_s:
             return
-        k_z = float(np.max(K_t))
+        k_z = float(K_t.max())
         limit = self.config.hover_estimator_limit * self.mass_kg * GRAVITY
-        self.f_hover_n = float(np.clip(self.f_hover_n - k_z / tau * e_map[2] * dt_s,
-                                       -limit, limit))
+        self.f_hover_n = min(max(self.f_hover_n - k_z / tau * float(e_map[2]) * dt_s, -limit),
+                             limit)

@@ -9,11 +9,12 @@ on, the target frame t of the estimate (z_t = surface normal). References are qu
 import collections
 import dataclasses
 import enum
+import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import ConfigError, param
+from uav_tilt_common.geometry import matrix_to_euler_zyx
 from uav_tilt_control import frames
 from uav_tilt_control.impedance import ImpedanceConfig, contact_depth_for_force
 from uav_tilt_control.types import ImpedanceSetpoint
@@ -104,11 +105,13 @@ class MinJerk:
         """(p, v, a) at ``t_s``; held at p1 after the end."""
         if self.done(t_s):
             return self.p1.copy(), np.zeros(3), np.zeros(3)
-        tau = max(t_s - self.t0_s, 0.0)
-        c = self._c
-        p = sum(c[i] * tau ** i for i in range(6))
-        v = sum(i * c[i] * tau ** (i - 1) for i in range(1, 6))
-        a = sum(i * (i - 1) * c[i] * tau ** (i - 2) for i in range(2, 6))
+        t1 = max(t_s - self.t0_s, 0.0)
+        t2 = t1 * t1
+        t3 = t2 * t1
+        # rows: d^k/dtau^k of (1, tau, ..., tau^5); one product gives p, v and a
+        p, v, a = np.array([[1.0, t1, t2, t3, t3 * t1, t3 * t2],
+                            [0.0, 1.0, 2.0 * t1, 3.0 * t2, 4.0 * t3, 5.0 * t3 * t1],
+                            [0.0, 0.0, 2.0, 6.0 * t1, 12.0 * t2, 20.0 * t3]]) @ self._c
         return p, v, a
 
 
@@ -140,6 +143,7 @@ class Mission:
         self._odom_age_s = np.inf
         self._R_map_t = np.eye(3)
         self._origin_map = np.zeros(3)
+        self._target_frame = (None, None)   # (target key, (R_map_t, origin_map, pitch))
         self._traj = None
         self._yaw_ref = 0.0
         self._yaw_goal = 0.0
@@ -267,7 +271,7 @@ class Mission:
         if self._target_usable(target):
             self._target_seen_s = max(self._target_seen_s, now_s - target[2])
         # a broken F/T reading cannot prove contact, nor trip the force limit
-        f_n = float(f_contact_n) if np.isfinite(f_contact_n) else 0.0
+        f_n = float(f_contact_n) if math.isfinite(f_contact_n) else 0.0
         if self._mode in NEAR_WALL and f_n > cfg.force_limit_n:
             self._failsafe('force_limit', Mode.RETREAT)
         getattr(self, '_tick_' + self._mode.value.lower())(target, f_n, stale)
@@ -448,11 +452,14 @@ class Mission:
     def _set_target_frame(self, target):
         cfg = self.config
         p_poi, n_map = target[0], target[1]
-        R_map_t, origin = frames.target_frame_from_normal(p_poi, n_map)
-        self._R_map_t, self._origin_map = R_map_t, origin
+        # tracked every tick, so the frame is rebuilt only when the estimate moves
+        key = tuple(np.concatenate((p_poi, n_map)).tolist())
+        if key != self._target_frame[0]:
+            pitch = frames.pitch_facing(n_map) if cfg.pitch_to_normal else 0.0
+            pitch = min(max(pitch, -cfg.max_pitch_rad), cfg.max_pitch_rad)
+            self._target_frame = (key, (*frames.target_frame_from_normal(p_poi, n_map), pitch))
+        self._R_map_t, self._origin_map, self._pitch = self._target_frame[1]
         self._yaw_goal = frames.yaw_facing(n_map, default_rad=self._yaw_ref)
-        pitch = frames.pitch_facing(n_map) if cfg.pitch_to_normal else 0.0
-        self._pitch = float(np.clip(pitch, -cfg.max_pitch_rad, cfg.max_pitch_rad))
 
     def _track_target(self, target):
         # the segment lives in frame t, so a refined estimate moves the whole reference
@@ -505,8 +512,8 @@ class Mission:
         if self._mode == Mode.SEARCH:
             self._yaw_goal = self._yaw_ref + cfg.search_yaw_rate_rad_s * dt
         err = frames.wrap_angle(self._yaw_goal - self._yaw_ref)
-        self._yaw_ref = frames.wrap_angle(
-            self._yaw_ref + np.clip(err, -cfg.yaw_rate_rad_s * dt, cfg.yaw_rate_rad_s * dt))
+        step = cfg.yaw_rate_rad_s * dt
+        self._yaw_ref = frames.wrap_angle(self._yaw_ref + min(max(err, -step), step))
         p, v, a = self._traj.sample(self._now_s)
         # leaving the wall, the reference starts behind the surface: keep the compliant
         # gains until it is out, so the push fades instead of stiffening
@@ -519,9 +526,9 @@ class Mission:
 
 
 def _finite_state(state):
-    return state is not None and all(
-        np.all(np.isfinite(x)) for x in (state.p_map, state.q_map_base, state.v_map))
+    return state is not None and bool(np.isfinite(
+        np.concatenate((state.p_map, state.q_map_base, state.v_map))).all())
 
 
 def _yaw_of(state):
-    return float(Rotation.from_quat(state.q_map_base).as_euler('ZYX')[0])
+    return matrix_to_euler_zyx(frames.quat_matrix(state.q_map_base))[0]

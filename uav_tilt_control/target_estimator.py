@@ -11,9 +11,9 @@ import dataclasses
 import typing
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import param
+from uav_tilt_common.geometry import quat_slerp, quat_to_matrix
 from uav_tilt_control import frames
 
 
@@ -64,30 +64,31 @@ class TargetEstimator:
         """Record a vehicle state; out-of-order or non-finite states are ignored."""
         if self._history and state.t_s <= self._history[-1][0]:
             return
-        if not (np.all(np.isfinite(state.p_map)) and np.all(np.isfinite(state.q_map_base))):
+        p_map = np.array(state.p_map, dtype=float)
+        q = np.asarray(state.q_map_base, dtype=float)
+        if not (np.isfinite(p_map).all() and np.isfinite(q).all()):
             return
-        self._history.append((float(state.t_s), np.array(state.p_map, dtype=float),
-                              Rotation.from_quat(state.q_map_base)))
+        # a unit quaternion: scipy's from_quat normalised it, the slerp needs it
+        self._history.append((float(state.t_s), p_map, frames.unit(q)))
 
     def pose_at(self, t_s):
         """Vehicle pose (R_map_base, p_map_base) at ``t_s``: linear position and slerp
         attitude between the bracketing states, or None outside the history."""
         if not self._history:
             return None
-        t_last, p_last, r_last = self._history[-1]
+        t_last, p_last, q_last = self._history[-1]
         if t_s >= t_last:
             if t_s - t_last > self.config.max_extrapolation_s:
                 return None
             # a frame slightly newer than the last odometry: the last pose is closest
-            return r_last.as_matrix(), p_last.copy()
+            return quat_to_matrix(q_last), p_last.copy()
         i = bisect.bisect_right(self._history, t_s, key=lambda s: s[0])
         if i == 0:
             return None
-        t0, p0, r0 = self._history[i - 1]
-        t1, p1, r1 = self._history[i]
+        t0, p0, q0 = self._history[i - 1]
+        t1, p1, q1 = self._history[i]
         u = (t_s - t0) / (t1 - t0)
-        r_u = r0 * Rotation.from_rotvec(u * (r0.inv() * r1).as_rotvec())
-        return r_u.as_matrix(), p0 + u * (p1 - p0)
+        return quat_to_matrix(quat_slerp(q0, q1, u)), p0 + u * (p1 - p0)
 
     def add_measurement(self, stamp_s, p_cam, n_cam_or_R_cam_t, covariance=None):
         """Add a vision measurement in the camera optical frame, stamped with the image time.

@@ -9,6 +9,7 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.mission import Mode
@@ -59,7 +60,7 @@ class Flight:
         truth = plant.state()
         self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
-                             push_n=self._true_push_n(), command=command))
+                             push_n=self._true_push_n(sensors.in_contact), command=command))
         plant.step(command)
 
     def run(self, duration_s, until=None):
@@ -74,13 +75,17 @@ class Flight:
         """Release the physics server."""
         self.plant.close()
 
-    def _true_push_n(self):
-        """Contact force on the wall along -normal [N] from the plant's truth."""
+    def _true_push_n(self, in_contact):
+        """Contact force on the wall along -normal [N] from the plant's truth.
+
+        ``in_contact`` (from read_sensors, which saw the true contact force) spares the
+        contact query on free-flight ticks, where the push is below 1e-6 N.
+        """
         world = self.plant.world
-        if world.R_map_target is None:
+        if world.R_map_target is None or not in_contact:
             return 0.0
         force_ee, _ = self.plant.contact_wrench_ee()
-        R_map_base = Rotation.from_quat(self.plant.state().q_map_base).as_matrix()
+        R_map_base = quat_to_matrix(self.plant.state().q_map_base)
         return float((R_map_base @ force_ee) @ world.R_map_target[:, 2])
 
 
