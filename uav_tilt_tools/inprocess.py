@@ -135,3 +135,41 @@ def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None
         return mission_result(flight, config.contact_force)
     finally:
         flight.close()
+
+
+class CameraVision:
+    """Vision in the loop without ROS: renders the eye-in-hand camera at its rate and runs
+    the VisionPipeline; each frame becomes one ``target/pose`` measurement stamped with the
+    frame time (as vision_node stamps it), "no target" frames included."""
+
+    NO_TARGET_COVARIANCE = np.array([-1.0] + [0.0] * 35)
+
+    def __init__(self, pipeline, camera_rate_hz, control_rate_hz):
+        self.pipeline = pipeline
+        self.every = max(1, int(round(control_rate_hz / camera_rate_hz)))
+        self.frames = 0
+        self.found = 0
+
+    def __call__(self, plant, t_s):
+        """Measurements for this tick: one per rendered frame."""
+        if plant.tick % self.every:
+            return []
+        rgb, depth, _ = plant.render()
+        result = self.pipeline.process(rgb, depth, t_s)
+        self.frames += 1
+        if not result.found:
+            return [(t_s, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]),
+                     self.NO_TARGET_COVARIANCE)]
+        self.found += 1
+        return [(t_s, result.p_cam, result.q_cam, result.covariance.ravel())]
+
+
+def camera_vision(plant_config, model_path, backend='auto', vision_config=None):
+    """A :class:`CameraVision` with the detector at ``model_path`` and the plant's camera."""
+    from uav_tilt_vision.backends import load_detector
+    from uav_tilt_vision.pipeline import VisionPipeline
+    from uav_tilt_vision.target_pose import CameraIntrinsics
+    cam = plant_config.camera
+    intrinsics = CameraIntrinsics(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
+    pipeline = VisionPipeline(load_detector(model_path, backend), intrinsics, vision_config)
+    return CameraVision(pipeline, cam.rate_hz, plant_config.control_hz)
