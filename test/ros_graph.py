@@ -59,6 +59,11 @@ class Probe:
             self.executor.spin_once(timeout_sec=0.05)
         return predicate()
 
+    def latest_status(self, topic):
+        """key -> value of the newest DiagnosticArray recorded on ``topic`` ({} if none)."""
+        msgs = self.messages.get(topic)
+        return status_values(msgs[-1]) if msgs else {}
+
     def close(self):
         self.executor.shutdown()
         self.node.destroy_node()

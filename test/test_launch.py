@@ -7,20 +7,13 @@ import subprocess
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 
-from ros_graph import REPO, Probe, status_values
+from ros_graph import REPO, status_values
 from uav_tilt_common import names, ros_qos
 from uav_tilt_tools.mission_watch import MissionWatch
 
 LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
 # The spec's shutdown limit for every node, plus the script's own bookkeeping.
 SHUTDOWN_S = 5.0 + 3.0
-
-
-@pytest.fixture
-def probe():
-    probe = Probe()
-    yield probe
-    probe.close()
 
 
 def children(pid):

@@ -8,7 +8,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
-from ros_graph import Probe, start, status_values, stop
+from ros_graph import start, stop
 from uav_tilt_common import names, ros_msgs, ros_qos
 
 TIMEOUT_S = 0.3
@@ -16,16 +16,8 @@ TIMEOUT_S = 0.3
 RTF = 0.5
 
 
-@pytest.fixture
-def probe():
-    probe = Probe()
-    yield probe
-    probe.close()
-
-
 def latest_status(probe):
-    msgs = probe.messages[names.PLANT_STATUS]
-    return status_values(msgs[-1]) if msgs else {}
+    return probe.latest_status(names.PLANT_STATUS)
 
 
 def test_lockstep_driver_timeout_bad_commands_and_clean_shutdown(tmp_path, probe):

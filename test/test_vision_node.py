@@ -12,7 +12,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 
-from ros_graph import REPO, Probe, start, status_values, stop
+from ros_graph import REPO, start, stop
 from uav_tilt_common import names, ros_msgs, ros_qos
 from uav_tilt_common.config import from_dict
 from uav_tilt_common.vehicle import VehicleParams
@@ -27,16 +27,8 @@ KEEP_ALL = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 CAMERA_PERIOD_NS = round(1e9 / CameraConfig().rate_hz)
 
 
-@pytest.fixture
-def probe():
-    probe = Probe()
-    yield probe
-    probe.close()
-
-
 def latest_status(probe):
-    msgs = probe.messages[names.VISION_STATUS]
-    return status_values(msgs[-1]) if msgs else {}
+    return probe.latest_status(names.VISION_STATUS)
 
 
 def poses_are_one_per_processed_frame(probe, max_lost_fraction=0.0):
