@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 
 from uav_tilt_sim.textures import (BOLT_HEAD_DIAMETER_FRAC, OBJECT_CLASSES, POI_UV,
-                                   WALL_FAMILIES, ground_texture, object_texture,
+                                   WALL_FAMILIES, object_texture,
                                    wall_texture)
 
 
 def _all(seed):
     rng = np.random.default_rng(seed)
     return ([object_texture(c, rng, 128) for c in OBJECT_CLASSES]
-            + [wall_texture(rng, 128, f) for f in WALL_FAMILIES] + [ground_texture(rng, 128)])
+            + [wall_texture(rng, 128, f) for f in WALL_FAMILIES])
 
 
 def test_same_seed_same_textures_and_other_seed_differs():

@@ -230,16 +230,3 @@ def wall_texture(rng: np.random.Generator, size_px=512, family=None):
     """Randomised wall texture; ``family`` (one of WALL_FAMILIES) is drawn when None."""
     family = family or WALL_FAMILIES[int(rng.integers(len(WALL_FAMILIES)))]
     return _finish(_WALLS[family](rng, int(size_px)), rng, noise_sigma=3.0)
-
-
-def ground_texture(rng: np.random.Generator, size_px=512):
-    """Randomised ground texture (grass- or asphalt-like noise with faint tiles)."""
-    s = int(size_px)
-    base = (np.float32([70, 110, 50]) if rng.random() < 0.5
-            else np.float32([90, 90, 95])) + rng.uniform(-15, 15, 3).astype(np.float32)
-    img = base + 30.0 * _fractal_noise(rng, (s, s), octaves=6)[..., None]
-    # Faint grid lines give optical flow and scale cues during take-off and landing.
-    step = s // 8
-    img[::step, :] *= 0.8
-    img[:, ::step] *= 0.8
-    return _finish(img, rng)

@@ -13,7 +13,7 @@ ARM_FRONT, ARM_REAR, TOOL = 0, 1, 2     # link indices = joint indices
 TOOL_ROOT_X_M = 0.10                    # where the tool rod leaves the hub
 HUB_HALF_EXTENTS_M = (0.08, 0.07, 0.05)
 HUB_CENTRE_Z_M = -0.03                  # hub hangs below the arms; its bottom is the skid
-PROP_RADIUS_M = 0.09
+VISUAL_CLEARANCE_M = 0.06             # nothing is drawn closer to the camera than this
 
 
 @dataclasses.dataclass
@@ -69,11 +69,15 @@ def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia
     tool_col = p.createCollisionShape(
         p.GEOM_SPHERE, radius=vehicle.tool_tip_radius_m,
         collisionFramePosition=[tip_centre_x, 0, 0], physicsClientId=client)
+    # The drawn rod starts ahead of the camera, for the same near-plane reason as the arms.
+    rod_start = max(TOOL_ROOT_X_M, vehicle.camera_xyz_m[0] + VISUAL_CLEARANCE_M)
+    rod_len = vehicle.tool_tip_x_m - vehicle.tool_tip_radius_m - rod_start
+    rod_centre = rod_start + rod_len / 2 - tool_com_x
     tool_vis = p.createVisualShapeArray(
         shapeTypes=[p.GEOM_CYLINDER, p.GEOM_SPHERE],
-        radii=[0.006, vehicle.tool_tip_radius_m], lengths=[tool_len, 0.0],
+        radii=[0.006, vehicle.tool_tip_radius_m], lengths=[rod_len, 0.0],
         rgbaColors=[[0.7, 0.7, 0.72, 1], [0.9, 0.3, 0.1, 1]],
-        visualFramePositions=[[0, 0, 0], [tip_centre_x, 0, 0]],
+        visualFramePositions=[[rod_centre, 0, 0], [tip_centre_x, 0, 0]],
         visualFrameOrientations=[p.getQuaternionFromEuler([0, np.pi / 2, 0]), [0, 0, 0, 1]],
         physicsClientId=client)
 
@@ -107,12 +111,10 @@ def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia
 
 
 def _arm_visual(client, l1_m):
-    """An arm rod along y with a propeller disc at each end."""
-    along_y = p.getQuaternionFromEuler([np.pi / 2, 0, 0])
-    return p.createVisualShapeArray(
-        shapeTypes=[p.GEOM_CYLINDER, p.GEOM_CYLINDER, p.GEOM_CYLINDER],
-        radii=[0.008, PROP_RADIUS_M, PROP_RADIUS_M], lengths=[2 * l1_m, 0.004, 0.004],
-        rgbaColors=[[0.2, 0.2, 0.2, 1], [0.3, 0.3, 0.35, 0.6], [0.3, 0.3, 0.35, 0.6]],
-        visualFramePositions=[[0, 0, 0], [0, l1_m, 0.02], [0, -l1_m, 0.02]],
-        visualFrameOrientations=[along_y, [0, 0, 0, 1], [0, 0, 0, 1]],
+    """An arm rod along y. Propellers are not drawn: spinning blades are nearly invisible to
+    a camera, and discs passing behind the eye-in-hand camera's near plane are mis-drawn
+    by TinyRenderer (no near-plane clipping)."""
+    return p.createVisualShape(
+        p.GEOM_CYLINDER, radius=0.008, length=2 * l1_m, rgbaColor=[0.2, 0.2, 0.2, 1],
+        visualFrameOrientation=p.getQuaternionFromEuler([np.pi / 2, 0, 0]),
         physicsClientId=client)

@@ -12,6 +12,7 @@ from uav_tilt_sim import textures
 
 WALL_THICKNESS_M = 0.2
 PANEL_THICKNESS_M = 0.01
+TILE_M = 0.5     # wall tiles (see _quad_visual)
 
 
 @dataclasses.dataclass
@@ -52,15 +53,30 @@ def wall_rotation(yaw_deg, inclination_deg):
     return np.column_stack([right, up, normal])
 
 
-def _quad_visual(client, half_w, half_h, texture_rgb, tmpdir, name):
-    """A textured rectangle facing +z of its frame: texture row 0 at +y, column 0 at -x."""
+def _quad_visual(client, half_w, half_h, texture_rgb, tmpdir, name, tile_m=None,
+                 offset_z=0.0):
+    """A textured rectangle facing +z of its frame, ``offset_z`` along it: texture row 0 at
+    +y, column 0 at -x.
+
+    Large rectangles are split into tiles of about ``tile_m``: TinyRenderer drops a whole
+    triangle when its vertices project far outside the image, which made big walls vanish
+    in halves at some camera poses.
+    """
     path = os.path.join(tmpdir, name + '.png')
     cv2.imwrite(path, cv2.cvtColor(texture_rgb, cv2.COLOR_RGB2BGR))
-    vertices = [[-half_w, half_h, 0], [half_w, half_h, 0], [half_w, -half_h, 0],
-                [-half_w, -half_h, 0]]
+    nx = max(1, int(np.ceil(2 * half_w / tile_m))) if tile_m else 1
+    ny = max(1, int(np.ceil(2 * half_h / tile_m))) if tile_m else 1
+    u, v = np.meshgrid(np.linspace(0.0, 1.0, nx + 1), np.linspace(0.0, 1.0, ny + 1))
+    vertices = np.column_stack([(2 * u.ravel() - 1) * half_w, (2 * v.ravel() - 1) * half_h,
+                                np.zeros(u.size)])
+    corner = (np.arange(ny)[:, None] * (nx + 1) + np.arange(nx)[None, :]).ravel()
+    # Two counter-clockwise triangles (seen from +z) per tile.
+    indices = np.column_stack([corner, corner + 1, corner + nx + 2,
+                               corner, corner + nx + 2, corner + nx + 1]).ravel()
     visual = p.createVisualShape(
-        p.GEOM_MESH, vertices=vertices, indices=[0, 2, 1, 0, 3, 2],
-        uvs=[[0, 1], [1, 1], [1, 0], [0, 0]], normals=[[0, 0, 1]] * 4,
+        p.GEOM_MESH, vertices=vertices.tolist(), indices=indices.tolist(),
+        uvs=np.column_stack([u.ravel(), v.ravel()]).tolist(),
+        normals=[[0, 0, 1]] * len(vertices), visualFramePosition=[0, 0, offset_z],
         physicsClientId=client)
     return visual, p.loadTexture(path, physicsClientId=client)
 
@@ -74,19 +90,19 @@ def build_world(client, scenario, texture_rng=None):
     origin = np.array([wall.position_m[0], wall.position_m[1], 0.0])
     quat = Rotation.from_matrix(R).as_quat().tolist()
     with tempfile.TemporaryDirectory() as tmpdir:
-        ground = _build_ground(client, rng, tmpdir)
+        ground = _build_ground(client)
         centre = origin + R[:, 1] * wall.height_m / 2 - R[:, 2] * WALL_THICKNESS_M / 2
         col = p.createCollisionShape(
             p.GEOM_BOX, halfExtents=[wall.width_m / 2, wall.height_m / 2, WALL_THICKNESS_M / 2],
             physicsClientId=client)
+        # The textured face is the box's only visual: a body without one would be drawn from
+        # its collision box, whose front face z-fights with the texture.
         vis, tex = _quad_visual(client, wall.width_m / 2, wall.height_m / 2,
-                                textures.wall_texture(rng), tmpdir, 'wall')
-        # The visual quad is offset to the front face by its own body frame: a second body.
-        wall_body = p.createMultiBody(0.0, col, -1, centre.tolist(), quat,
+                                textures.wall_texture(rng), tmpdir, 'wall', TILE_M,
+                                offset_z=WALL_THICKNESS_M / 2)
+        wall_body = p.createMultiBody(0.0, col, vis, centre.tolist(), quat,
                                       physicsClientId=client)
-        face = p.createMultiBody(0.0, -1, vis, (centre + R[:, 2] * WALL_THICKNESS_M / 2)
-                                 .tolist(), quat, physicsClientId=client)
-        p.changeVisualShape(face, -1, textureUniqueId=tex, physicsClientId=client)
+        p.changeVisualShape(wall_body, -1, textureUniqueId=tex, physicsClientId=client)
         _set_contact(client, wall_body, wall)
         objects = [_build_object(client, o, origin, R, quat, rng, tmpdir, i, wall)
                    for i, o in enumerate(scenario.objects)]
@@ -105,12 +121,11 @@ def _set_contact(client, body, wall):
                      physicsClientId=client)
 
 
-def _build_ground(client, rng, tmpdir):
-    half = 25.0
-    col = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
-    vis, tex = _quad_visual(client, half, half, textures.ground_texture(rng), tmpdir, 'ground')
-    ground = p.createMultiBody(0.0, col, vis, [0, 0, 0], physicsClientId=client)
-    p.changeVisualShape(ground, -1, textureUniqueId=tex, physicsClientId=client)
+def _build_ground(client):
+    # Collision only: TinyRenderer does not clip triangles at the near plane, so a ground
+    # mesh passing under the camera was drawn across the image.
+    ground = p.createMultiBody(0.0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client),
+                               -1, [0, 0, 0], physicsClientId=client)
     p.changeDynamics(ground, -1, lateralFriction=0.8, physicsClientId=client)
     return ground
 

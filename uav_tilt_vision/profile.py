@@ -11,7 +11,7 @@ import json
 import torch
 from torch import nn
 
-from uav_tilt_vision.detector import Detector
+from uav_tilt_vision.detector import Detector, load_model
 
 TYPES = ('conv3x3', 'conv1x1', 'bn', 'other')
 
@@ -74,15 +74,24 @@ def profile_model(model, input_shape):
     return {'params': total_p, 'macs': total_m, 'by_type': by_type, 'layers': layers}
 
 
-def main():
-    """Print the summary for the reference YOLOv3-tiny and the deployed width at 320x256."""
+def report(model_path=None):
+    """Summaries (params, MACs, by_type) of the reference YOLOv3-tiny (80 classes) and the
+    deployed width at 320x256, plus the ``Detector`` saved at ``model_path`` when given."""
+    models = [('yolov3_tiny_ref_80cls', Detector(80, 1.0)),
+              ('deployed_w0.25_3cls', Detector(3, 0.25))]
+    if model_path:
+        models.append((str(model_path), load_model(model_path)))
     shape = (1, 3, 256, 320)
-    report = {}
-    for label, model in (('yolov3_tiny_ref_80cls', Detector(80, 1.0)),
-                         ('deployed_w0.25_3cls', Detector(3, 0.25))):
+    out = {}
+    for label, model in models:
         prof = profile_model(model, shape)
-        report[label] = {k: prof[k] for k in ('params', 'macs', 'by_type')}
-    print(json.dumps(report, indent=2))
+        out[label] = {k: prof[k] for k in ('params', 'macs', 'by_type')}
+    return out
+
+
+def main():
+    """Print ``report()`` as JSON."""
+    print(json.dumps(report(), indent=2))
 
 
 if __name__ == '__main__':

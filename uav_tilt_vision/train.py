@@ -60,10 +60,13 @@ def num_classes_of(dataset, meta):
 
 def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_SIZE, batch=16,
           device='auto', lr=3e-3, weight_decay=5e-4, augment=True, hflip=False, anchors=None,
-          eval_dir=None, workers=0, log=print):
+          eval_dir=None, workers=0, log=print, model=None, crop=None):
     """Train a ``Detector`` and write weights (``save_model``) plus a model card JSON beside them.
 
     ``anchors`` None = k-means on the training labels (defaults when too few boxes).
+    ``model``: fine-tune this model (e.g. a pruned one) instead of a new one; it keeps its
+    anchors and ``width_mult`` and ``anchors`` are then unused.
+    ``crop`` (w, h): train on object-centred windows of the input (``yolo_data.random_crop``).
     ``eval_dir``: optional YOLO-format set evaluated at the end (metrics go in the card).
     Returns the model card dict.
     """
@@ -72,15 +75,18 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     random.seed(seed)
     dev = resolve_device(device)
     torch.backends.cudnn.benchmark = False
-    ds = YoloDataset(data_dir, img_size, augment=augment, hflip=hflip, seed=seed)
+    ds = YoloDataset(data_dir, img_size, augment=augment, hflip=hflip, seed=seed,
+                     crop=crop if augment else None)
     meta = read_meta(data_dir)
     n_cls = num_classes_of(ds, meta)
-    if anchors is None:
-        try:
-            anchors = kmeans_anchors(ds.label_wh())
-        except ValueError:
-            anchors = DEFAULT_ANCHORS
-    model = Detector(n_cls, width_mult, anchors=anchors, img_size=img_size).to(dev)
+    if model is None:
+        if anchors is None:
+            try:
+                anchors = kmeans_anchors(ds.label_wh())
+            except ValueError:
+                anchors = DEFAULT_ANCHORS
+        model = Detector(n_cls, width_mult, anchors=anchors, img_size=img_size)
+    model = model.to(dev)
     loss_fn = YoloLoss(model.anchors).to(dev)
     loader = torch.utils.data.DataLoader(
         ds, batch_size=batch, shuffle=True, collate_fn=collate, num_workers=workers,
@@ -111,7 +117,8 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     model.eval()
     card = {'data_dir': str(data_dir), 'data_seed': meta.get('seed'),
             'classes': meta.get('classes'), 'num_classes': n_cls, 'epochs': epochs,
-            'seed': seed, 'width_mult': width_mult, 'img_size': list(img_size), 'batch': batch,
+            'seed': seed, 'width_mult': model.width_mult, 'img_size': list(model.img_size),
+            'batch': batch, 'crop': list(crop) if crop else None,
             'lr': lr, 'device': str(dev), 'anchors': model.anchors.tolist(),
             'channels': model.channels(), 'params': sum(p.numel() for p in params),
             'final_loss': history[-1] if history else None, 'loss_history': history,
@@ -124,8 +131,12 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
 
 
 def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
-    """COCO-style mAP of ``model`` on a YOLO-format set: {'map50', 'map50_95', 'backend'}."""
-    ds = YoloDataset(data_dir, model.img_size)
+    """COCO-style mAP of ``model`` on a YOLO-format set: {'map50', 'map50_95', 'backend'}.
+
+    ``model``: a ``Detector`` or any object whose ``predict(images, conf_thres, iou_thres)``
+    maps a list of uint8 RGB images to one (N, 6) array each (``backends``).
+    """
+    ds = YoloDataset(data_dir)
     preds, gts = [], []
     for start in progress(range(0, len(ds), batch), desc='eval', unit='batch'):
         images = [ds.read_rgb(i) for i in range(start, min(start + batch, len(ds)))]

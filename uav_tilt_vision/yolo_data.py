@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import torch
 
-from uav_tilt_vision.boxes import letterbox, wh_iou, xywh_to_xyxy
+from uav_tilt_vision.boxes import letterbox, wh_iou, xywh_to_xyxy, xyxy_to_xywh
 from uav_tilt_vision.detector import IMG_SIZE
 
 IMG_EXTS = ('.png', '.jpg', '.jpeg', '.bmp')
@@ -51,10 +51,12 @@ class YoloDataset(torch.utils.data.Dataset):
     ``[0, class, cx, cy, w, h]``; ``collate`` fills column 0 with the batch index.
     Augmentation draws from an RNG seeded by (seed, epoch, index), so results do not
     depend on worker processes. Enable ``hflip`` only for mirror-symmetric classes.
+    ``crop`` (w, h), with ``augment``: train on a window around a random object
+    (``random_crop``), at full scale: cheaper steps, same object sizes as at inference.
     """
 
     def __init__(self, root, img_size=IMG_SIZE, augment=False, hflip=False,
-                 hsv=(0.015, 0.5, 0.3), seed=0):
+                 hsv=(0.015, 0.5, 0.3), seed=0, crop=None):
         self.root = Path(root)
         self.images = sorted(p for p in (self.root / 'images').iterdir()
                              if p.suffix.lower() in IMG_EXTS)
@@ -62,7 +64,7 @@ class YoloDataset(torch.utils.data.Dataset):
             raise FileNotFoundError(f'no images in {self.root / "images"}')
         self.img_size = tuple(img_size)
         self.augment, self.hflip, self.hsv = augment, hflip, hsv
-        self.seed, self.epoch = seed, 0
+        self.seed, self.epoch, self.crop = seed, 0, crop
 
     def __len__(self):
         return len(self.images)
@@ -99,6 +101,8 @@ class YoloDataset(torch.utils.data.Dataset):
         img, lab = self.load(i)
         if self.augment:
             rng = np.random.default_rng([self.seed, self.epoch, i])
+            if self.crop:
+                img, lab = random_crop(img, lab, self.crop, rng)
             if any(self.hsv):  # the uint8 HSV round trip is lossy: skip it when disabled
                 img = hsv_jitter(img, self.hsv, rng)
             if self.hflip and rng.random() < 0.5:
@@ -112,6 +116,28 @@ class YoloDataset(torch.utils.data.Dataset):
     def label_wh(self):
         """All label sizes (n, 2) in input pixels (for anchor clustering)."""
         return np.concatenate([self.load(i)[1][:, 3:5] for i in range(len(self))], 0)
+
+
+def random_crop(img, lab, size, rng, min_kept=0.4):
+    """A (w, h) window holding a random labelled object (anywhere, if none) and its labels.
+
+    Boxes are clipped to the window; one keeping less than ``min_kept`` of its area is
+    dropped (like the data set's visibility rule).
+    """
+    w, h = size
+    H, W = img.shape[:2]
+    if len(lab):
+        cx, cy = lab[int(rng.integers(len(lab))), 1:3]
+        x0, y0 = rng.uniform([cx - w, cy - h], [cx, cy])
+    else:
+        x0, y0 = rng.uniform([0, 0], [W - w, H - h])
+    x0, y0 = int(np.clip(x0, 0, W - w)), int(np.clip(y0, 0, H - h))
+    xyxy = xywh_to_xyxy(lab[:, 1:]) - [x0, y0, x0, y0]
+    clipped = np.clip(xyxy, 0, [w, h, w, h])
+    area = np.prod(clipped[:, 2:] - clipped[:, :2], 1)
+    keep = area >= min_kept * lab[:, 3] * lab[:, 4]
+    out = np.concatenate([lab[keep, :1], xyxy_to_xywh(clipped[keep])], 1)
+    return np.ascontiguousarray(img[y0:y0 + h, x0:x0 + w]), out
 
 
 def collate(batch):

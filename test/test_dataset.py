@@ -1,0 +1,121 @@
+"""Rendered detector data sets: format, label geometry, determinism, split separation."""
+
+import json
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from uav_tilt_sim.camera import CameraConfig, render
+from uav_tilt_sim.textures import OBJECT_CLASSES, OBJECT_SIZE_M
+from uav_tilt_vision import dataset, vision_cli
+from uav_tilt_vision.yolo_data import YoloDataset, random_crop, read_labels
+
+
+@pytest.fixture(scope='module')
+def small_set(tmp_path_factory):
+    out = tmp_path_factory.mktemp('ds')
+    return out, dataset.generate(out, 9, seed=4, show_progress=False)
+
+
+def test_yolo_layout_and_meta(small_set):
+    out, meta = small_set
+    assert len(YoloDataset(out)) == 9
+    assert meta['classes'] == list(OBJECT_CLASSES) and meta['split'] == 'train'
+    saved = json.loads((out / 'meta.json').read_text())
+    assert saved['seed'] == 4 and saved['split_spec']['wall_families']
+    rows = np.concatenate([read_labels(f) for f in sorted((out / 'labels').iterdir())])
+    assert len(rows) == sum(meta['boxes_per_class']) > 0
+    assert set(rows[:, 0].astype(int)) <= set(range(len(OBJECT_CLASSES)))
+    assert np.all((rows[:, 1:] > 0) & (rows[:, 1:] <= 1))
+
+
+def test_same_seed_same_images_any_job_count(small_set, tmp_path):
+    out, _ = small_set
+    dataset.generate(tmp_path, 9, seed=4, jobs=2, show_progress=False)
+    for name in ('000000', '000008'):
+        assert (tmp_path / 'labels' / f'{name}.txt').read_text() == \
+            (out / 'labels' / f'{name}.txt').read_text()
+        assert (tmp_path / 'images' / f'{name}.png').read_bytes() == \
+            (out / 'images' / f'{name}.png').read_bytes()
+
+
+def test_splits_are_disjoint():
+    train, held = dataset.SPLITS['train'], dataset.SPLITS['heldout']
+    assert train.stream != held.stream
+    assert not set(train.wall_families) & set(held.wall_families)
+    for field in ('ambient', 'diffuse', 'light_tint', 'light_azimuth_deg'):
+        a, b = getattr(train, field), getattr(held, field)
+        assert a[1] <= b[0] or b[1] <= a[0], field
+
+
+def test_boxes_match_the_projected_object_faces():
+    """Unoccluded objects fully in view: box == bounds of the projected face corners."""
+    cam = CameraConfig()
+    client = p.connect(p.DIRECT)
+    checked = 0
+    try:
+        for world in range(6):
+            rng = np.random.default_rng([11, world])
+            info = dataset.build_random_world(client, rng, dataset.SPLITS['train'])
+            for _ in range(4):
+                eye, R_cam = dataset.camera_pose(rng, info, cam)
+                _, _, seg = render(client, cam, eye, R_cam, segmentation=True)
+                rows = dataset.labels_from_segmentation(seg, info, eye, R_cam, cam)
+                for obj in info.objects:
+                    corners = [obj.centre_map + info.R_map_wall @ [su, sv, 0.0]
+                               for su in (-OBJECT_SIZE_M / 2, OBJECT_SIZE_M / 2)
+                               for sv in (-OBJECT_SIZE_M / 2, OBJECT_SIZE_M / 2)]
+                    pc = np.array([R_cam.T @ (c - eye) for c in corners])
+                    uv = (cam.k_matrix() @ pc.T).T
+                    uv = uv[:, :2] / uv[:, 2:]
+                    inside = np.all((uv > 2) & (uv < [cam.width - 2, cam.height - 2]))
+                    if not inside or np.count_nonzero(seg == obj.body) < 400:
+                        continue
+                    box = np.concatenate([uv.min(0), uv.max(0)])
+                    labelled = [[(cx - w / 2) * cam.width, (cy - h / 2) * cam.height,
+                                 (cx + w / 2) * cam.width, (cy + h / 2) * cam.height]
+                                for c, cx, cy, w, h in rows
+                                if c == OBJECT_CLASSES.index(obj.cls)]
+                    assert labelled, 'a fully visible object got no label'
+                    best = min(labelled, key=lambda b: np.abs(np.subtract(b, box)).max())
+                    # 1.5 px: rasterisation of the edges (pixel centres) on each side
+                    np.testing.assert_allclose(best, box, atol=1.5)
+                    checked += 1
+            p.resetSimulation(physicsClientId=client)
+    finally:
+        p.disconnect(client)
+    assert checked >= 3
+
+
+def test_photometric_keeps_shape_and_changes_pixels():
+    rng = np.random.default_rng(0)
+    img = np.full((24, 32, 3), 128, np.uint8)
+    out = dataset.photometric(img, rng)
+    assert out.shape == img.shape and out.dtype == np.uint8 and not np.array_equal(out, img)
+
+
+def test_unknown_split_is_refused(tmp_path):
+    with pytest.raises(ValueError, match='split'):
+        dataset.generate(tmp_path, 1, split='test')
+
+
+def test_random_crop_keeps_an_object_and_clips_boxes():
+    img = np.arange(256 * 320 * 3, dtype=np.uint32).reshape(256, 320, 3).astype(np.uint8)
+    lab = np.array([[1, 100.0, 100.0, 40, 40], [2, 300.0, 240.0, 30, 30]])
+    for seed in range(20):
+        out, kept = random_crop(img, lab, (192, 160), np.random.default_rng(seed))
+        assert out.shape == (160, 192, 3) and len(kept) >= 1
+        x1y1, x2y2 = kept[:, 1:3] - kept[:, 3:] / 2, kept[:, 1:3] + kept[:, 3:] / 2
+        assert np.all(x1y1 >= 0) and np.all(x2y2 <= [192, 160])
+        # every kept box keeps at least 40 % of its area
+        full = np.where(kept[:, 0] == 1, 1600.0, 900.0)
+        assert np.all(kept[:, 3] * kept[:, 4] >= 0.4 * full - 1e-6)
+
+
+def test_cli_dataset_prints_json(tmp_path, capsys):
+    assert vision_cli.main(['dataset', '--out', str(tmp_path), '--n', '2', '--seed', '3',
+                            '--split', 'heldout']) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out['seed'] == 3 and out['split'] == 'heldout' and out['n'] == 2
+    assert len(list((tmp_path / 'images').iterdir())) == 2

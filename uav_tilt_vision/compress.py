@@ -1,0 +1,138 @@
+"""Detector compression: structured channel pruning + fine-tuning, then int8 ONNX.
+
+1. ``prune``: torch-pruning removes whole conv output channels of lowest group L2
+   magnitude (the dependency graph keeps the c4 -> c10 route and BN consistent); the
+   heads keep their outputs. The result is still a ``Detector`` with irregular channel
+   counts, saved with ``save_model``.
+2. Fine-tuning with ``train.train(model=...)`` recovers the accuracy.
+3. ``export_onnx`` + ``quantize_int8``: ONNX Runtime static quantization, QDQ format,
+   per-channel int8 weights, uint8 activations calibrated (min/max) on training images.
+   BatchNorm is folded into the convs by the exporter. The graph outputs the raw heads;
+   decoding and NMS run outside it, in float (``backends``), because one int8 scale cannot
+   hold both pixel coordinates and probabilities.
+"""
+
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from uav_tilt_vision.boxes import letterbox
+from uav_tilt_vision.detector import load_model, save_model
+from uav_tilt_vision.profile import profile_model
+from uav_tilt_vision.train import card_path, evaluate, git_commit, train
+from uav_tilt_vision.yolo_data import YoloDataset
+
+ONNX_OPSET = 17
+
+
+def prune(model, ratio, round_to=8):
+    """Remove ``ratio`` of the channels of every conv except the heads, in place."""
+    import torch_pruning as tp
+    example = torch.zeros(1, 3, model.img_size[1], model.img_size[0])
+    pruner = tp.pruner.MetaPruner(
+        model, example, importance=tp.importance.GroupMagnitudeImportance(p=2),
+        pruning_ratio=ratio, ignored_layers=[model.head0, model.head1], round_to=round_to)
+    pruner.step()
+    return model
+
+
+def export_onnx(model, path, source):
+    """Export the raw heads of ``model`` (eval mode, dynamic batch) to ONNX.
+
+    ``source``: file name of the checkpoint, recorded (with anchors, input size and class
+    count) in the 'detector' metadata entry for ``backends``.
+    """
+    model.eval()
+    w, h = model.img_size
+    torch.onnx.export(model, (torch.zeros(1, 3, h, w),), str(path), input_names=['images'],
+                      output_names=['head0', 'head1'], dynamic_axes={'images': {0: 'batch'}},
+                      opset_version=ONNX_OPSET, dynamo=False)
+    set_metadata(path, {'anchors': model.anchors.tolist(), 'img_size': list(model.img_size),
+                        'num_classes': model.num_classes, 'source': source})
+
+
+def set_metadata(path, detector_meta):
+    """Write the 'detector' JSON metadata entry of an ONNX file."""
+    import onnx
+    proto = onnx.load(str(path))
+    del proto.metadata_props[:]
+    proto.metadata_props.add(key='detector', value=json.dumps(detector_meta))
+    onnx.save(proto, str(path))
+
+
+def calibration_images(data_dir, n, img_size):
+    """The first ``n`` images of a set (sorted names: deterministic), letterboxed, NCHW."""
+    ds = YoloDataset(data_dir, img_size)
+    for i in range(min(n, len(ds))):
+        img = letterbox(ds.read_rgb(i), img_size)[0]
+        yield img.transpose(2, 0, 1)[None].astype(np.float32) / 255.0
+
+
+def quantize_int8(fp32_path, out_path, data_dir, n_calib, img_size):
+    """Static per-channel QDQ int8 quantization of an ONNX model (metadata kept)."""
+    import onnx
+    from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod,
+                                          QuantFormat, QuantType, quantize_static)
+
+    class Reader(CalibrationDataReader):
+        def __init__(self):
+            self.it = iter(calibration_images(data_dir, n_calib, img_size))
+
+        def get_next(self):
+            x = next(self.it, None)
+            return None if x is None else {'images': x}
+
+    meta = {p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props}
+    quantize_static(str(fp32_path), str(out_path), Reader(), quant_format=QuantFormat.QDQ,
+                    per_channel=True, activation_type=QuantType.QUInt8,
+                    weight_type=QuantType.QInt8, calibrate_method=CalibrationMethod.MinMax)
+    set_metadata(out_path, json.loads(meta['detector']))
+
+
+def size_stats(model):
+    """Parameters and MACs per image at the model's input size."""
+    prof = profile_model(model, (1, 3, model.img_size[1], model.img_size[0]))
+    return {'params': prof['params'], 'macs': prof['macs']}
+
+
+def compress(model_path, data_dir, out_dir, ratio=0.5, finetune_epochs=4, seed=0,
+             calib_images=128, eval_dir=None, lr=1e-3, crop=None):
+    """fp32 ``.pt`` -> ``detector_pruned.pt`` (+ card) and ``detector_int8.onnx`` (+ card).
+
+    Returns a report with params, MACs and (with ``eval_dir``) mAP of every stage.
+    ``crop``: fine-tune on object-centred windows (see ``train.train``).
+    """
+    from uav_tilt_vision.backends import OnnxDetector
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    model = load_model(model_path)
+    report = {'fp32': {**size_stats(model), 'path': str(model_path)}}
+    if eval_dir:
+        report['fp32'].update(evaluate(model, eval_dir))
+    pruned_path = out / 'detector_pruned.pt'
+    pruned = prune(model, ratio)
+    card = train(data_dir, pruned_path, finetune_epochs, seed, lr=lr, model=pruned,
+                 eval_dir=eval_dir, device='cpu', crop=crop)
+    card.update(source=str(model_path), pruning_ratio=ratio)
+    save_model(pruned_path, pruned, card)
+    card_path(pruned_path).write_text(json.dumps(card, indent=2))
+    report['pruned'] = {**size_stats(pruned), 'path': str(pruned_path),
+                        **(card['metrics'] or {})}
+    int8_path = out / 'detector_int8.onnx'
+    with tempfile.TemporaryDirectory() as tmp:
+        fp32_onnx = Path(tmp) / 'pruned_fp32.onnx'
+        export_onnx(pruned, fp32_onnx, pruned_path.name)
+        quantize_int8(fp32_onnx, int8_path, data_dir, calib_images, pruned.img_size)
+    report['int8'] = {**size_stats(pruned), 'path': str(int8_path)}
+    if eval_dir:
+        report['int8'].update(evaluate(OnnxDetector(int8_path), eval_dir))
+    int8_card = {'source': pruned_path.name, 'quantization': 'onnxruntime static QDQ, '
+                 'per-channel int8 weights, uint8 activations, MinMax calibration',
+                 'calib_images': calib_images, 'calib_data': str(data_dir),
+                 'data_seed': card.get('data_seed'), 'metrics': report['int8'],
+                 'git_commit': git_commit()}
+    card_path(int8_path).write_text(json.dumps(int8_card, indent=2))
+    return report

@@ -1,0 +1,266 @@
+"""Domain-randomised, automatically labelled detector images rendered with the plant's world.
+
+Each world (wall, ground, 1-5 inspection objects, plain distractor panels) is built with
+``uav_tilt_sim.world.build_world`` and photographed by the plant's camera model from
+``IMAGES_PER_WORLD`` random poses: 0.4-4 m (log-uniform) from a point on the wall, up to
+45 deg off its normal, with roll jitter and, sometimes, an occluding bar in front. Lighting,
+exposure, blur and sensor noise are drawn per image. Boxes are the tight bounds of each
+object's pixels in the simulator's segmentation, so occlusion and truncation are exact.
+
+Splits (``SPLITS``): ``train`` and ``heldout`` draw from disjoint RNG streams (object,
+wall and ground textures never repeat), disjoint wall texture families and disjoint
+lighting ranges; ``meta.json`` records them. Output is YOLO text format (``yolo_data``).
+Image k of a set depends only on (seed, split, k // IMAGES_PER_WORLD), not on ``jobs``.
+"""
+
+import dataclasses
+import json
+import multiprocessing
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pybullet as p
+from scipy.spatial.transform import Rotation
+from tqdm import tqdm
+
+from uav_tilt_sim import textures
+from uav_tilt_sim.camera import CameraConfig, Lighting, render
+from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
+from uav_tilt_sim.world import build_world
+
+CLASSES = textures.OBJECT_CLASSES
+IMAGES_PER_WORLD = 6
+MIN_VISIBLE_PX = 30
+# An object less visible than this (occluded or cut by the image border) is not labelled:
+# too little of it is left to tell its class.
+MIN_VISIBLE_FRACTION = 0.35
+MAX_VIEW_ANGLE_DEG = 45.0
+DISTANCE_M = (0.4, 4.0)
+PATCH_UV_M = ((-2.0, 0.3), (2.0, 3.1))   # where objects and panels go on the wall (u, v)
+OCCLUDER_PROB = 0.3
+
+
+@dataclasses.dataclass(frozen=True)
+class SplitSpec:
+    """What a split may draw: its RNG stream, wall families and lighting ranges."""
+
+    stream: int
+    wall_families: tuple
+    ambient: tuple
+    diffuse: tuple
+    light_tint: tuple          # per-channel light colour range
+    light_azimuth_deg: tuple   # |azimuth| of the light about the wall normal
+
+
+SPLITS = {
+    'train': SplitSpec(0, ('concrete', 'bricks', 'stripes'), (0.45, 0.75), (0.25, 0.55),
+                       (0.85, 1.0), (0.0, 60.0)),
+    'heldout': SplitSpec(1, ('painted_panels',), (0.35, 0.45), (0.55, 0.65),
+                         (0.72, 0.85), (60.0, 85.0)),
+}
+
+
+def random_scenario(rng):
+    """A wall with 1-5 non-overlapping inspection objects of random classes."""
+    wall = WallConfig(position_m=[3.0, 0.0], yaw_deg=float(rng.uniform(-180, 180)),
+                      inclination_deg=float(rng.uniform(-20, 20)),
+                      width_m=float(rng.uniform(6, 12)), height_m=float(rng.uniform(4, 6)))
+    objects = []
+    for _ in range(int(rng.integers(1, 6))):
+        u, v = rng.uniform(*PATCH_UV_M)
+        if all(max(abs(u - o.u_m), abs(v - o.v_m)) > 0.3 for o in objects):
+            cls = CLASSES[int(rng.integers(len(CLASSES)))]
+            objects.append(ObjectConfig(cls=cls, u_m=float(u), v_m=float(v)))
+    return Scenario(wall=wall, objects=objects)
+
+
+def _box_body(client, centre, R, half_extents, rng):
+    """A plain-coloured static box oriented by R (map)."""
+    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half_extents),
+                              rgbaColor=list(rng.uniform(0, 1, 3)) + [1.0],
+                              physicsClientId=client)
+    return p.createMultiBody(0.0, -1, vis, list(centre), Rotation.from_matrix(R).as_quat(),
+                             physicsClientId=client)
+
+
+def build_random_world(client, rng, spec):
+    """Build a random world whose wall texture is of one of ``spec``'s families."""
+    scenario = random_scenario(rng)
+    info = build_world(client, scenario, texture_rng=rng)
+    family = spec.wall_families[int(rng.integers(len(spec.wall_families)))]
+    with tempfile.TemporaryDirectory() as tmpdir:
+        path = str(Path(tmpdir) / 'wall.png')
+        tex = textures.wall_texture(rng, family=family)
+        cv2.imwrite(path, cv2.cvtColor(tex, cv2.COLOR_RGB2BGR))
+        p.changeVisualShape(info.wall_body, -1, physicsClientId=client,
+                            textureUniqueId=p.loadTexture(path, physicsClientId=client))
+    R = info.R_map_wall
+    for _ in range(int(rng.integers(0, 4))):     # distractors: object-sized plain panels
+        u, v = rng.uniform(*PATCH_UV_M)
+        if all(max(abs(u - o.u_m), abs(v - o.v_m)) > 0.3 for o in scenario.objects):
+            centre = info.wall_origin_map + R @ [u, v, 0.004]
+            _box_body(client, centre, R, [*rng.uniform(0.05, 0.15, 2), 0.003], rng)
+    return info
+
+
+def camera_pose(rng, info, cam):
+    """Random (eye, R_map_cam) 0.4-4 m from the wall looking at it, up to 45 deg off-normal.
+
+    The aim point is offset from an object by up to the half field of view, so objects
+    land anywhere in the image, including cut by its border.
+    """
+    R = info.R_map_wall
+    dist = float(np.exp(rng.uniform(*np.log(DISTANCE_M))))
+    obj = info.objects[int(rng.integers(len(info.objects)))]
+    half_fov = dist * np.array([cam.width / cam.fx, cam.height / cam.fy]) / 2
+    aim = obj.centre_map + R[:, :2] @ (rng.uniform(-1, 1, 2) * half_fov)
+    tilt = np.radians(MAX_VIEW_ANGLE_DEG) * np.sqrt(rng.random())  # uniform over the cone
+    azim = rng.uniform(0, 2 * np.pi)
+    eye = aim + dist * (R @ [np.sin(tilt) * np.cos(azim), np.sin(tilt) * np.sin(azim),
+                             np.cos(tilt)])
+    eye[2] = max(eye[2], 0.15)
+    z = (aim - eye) / np.linalg.norm(aim - eye)
+    x = np.cross([0.0, 0.0, -1.0], z)
+    x /= np.linalg.norm(x)
+    R_cam = np.column_stack([x, np.cross(z, x), z])
+    roll = Rotation.from_euler('z', rng.uniform(-10, 10), degrees=True).as_matrix()
+    return eye, R_cam @ roll
+
+
+def random_lighting(rng, spec, R_map_wall):
+    """Lighting drawn from the split's ranges; direction about the wall normal."""
+    az = np.radians(rng.uniform(*spec.light_azimuth_deg)) * rng.choice([-1, 1])
+    el = np.radians(rng.uniform(15, 70))
+    direction = R_map_wall @ [np.cos(el) * np.sin(az), np.sin(el), np.cos(el) * np.cos(az)]
+    return Lighting(direction=tuple(direction), color=tuple(rng.uniform(*spec.light_tint, 3)),
+                    ambient=float(rng.uniform(*spec.ambient)),
+                    diffuse=float(rng.uniform(*spec.diffuse)),
+                    specular=float(rng.uniform(0.0, 0.2)))
+
+
+def add_occluder(client, rng, eye, info):
+    """A bar (pipe, cable, strut) between the camera and a random object; its body id."""
+    obj = info.objects[int(rng.integers(len(info.objects)))]
+    t = rng.uniform(0.3, 0.85)
+    centre = eye + t * (obj.centre_map - eye) + rng.uniform(-0.12, 0.12, 3) * t
+    R = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
+    return _box_body(client, centre, R, [rng.uniform(0.005, 0.05), rng.uniform(0.1, 0.8),
+                                         rng.uniform(0.005, 0.05)], rng)
+
+
+def photometric(rgb, rng):
+    """Exposure gain and gamma, optional Gaussian or motion blur, sensor noise."""
+    img = np.clip(rgb.astype(np.float32) / 255.0 * np.exp(rng.uniform(-0.5, 0.4)), 0, 1)
+    img = img ** rng.uniform(0.75, 1.35)
+    r = rng.random()
+    if r < 0.2:
+        img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.5, 1.5))
+    elif r < 0.35:
+        n = int(rng.integers(3, 10))
+        kernel = np.zeros((n, n), np.float32)
+        kernel[n // 2] = 1.0 / n
+        rot = cv2.getRotationMatrix2D(((n - 1) / 2, (n - 1) / 2), rng.uniform(0, 180), 1.0)
+        kernel = cv2.warpAffine(kernel, rot, (n, n))
+        img = cv2.filter2D(img, -1, kernel / kernel.sum())
+    img = img + rng.normal(0, rng.uniform(0, 0.03), img.shape).astype(np.float32)
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def projected_area(centre_map, R_map_wall, eye, R_map_cam, cam):
+    """Image area (px^2) of an object's whole front face; inf when it reaches behind the eye."""
+    half = textures.OBJECT_SIZE_M / 2
+    corners = [centre_map + R_map_wall @ [su * half, sv * half, 0.0]
+               for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    pc = np.array([R_map_cam.T @ (c - eye) for c in corners])
+    if np.any(pc[:, 2] < cam.near_m):
+        return np.inf
+    uv = (cam.k_matrix() @ pc.T).T
+    return abs(cv2.contourArea((uv[:, :2] / uv[:, 2:]).astype(np.float32)))
+
+
+def labels_from_segmentation(seg, info, eye, R_map_cam, cam):
+    """YOLO rows [class, cx, cy, w, h] (normalised) for the sufficiently visible objects."""
+    rows = []
+    for obj in info.objects:
+        ys, xs = np.nonzero(seg == obj.body)
+        full = projected_area(obj.centre_map, info.R_map_wall, eye, R_map_cam, cam)
+        if len(xs) < MIN_VISIBLE_PX or len(xs) < MIN_VISIBLE_FRACTION * full:
+            continue
+        x1, x2, y1, y2 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
+        rows.append([CLASSES.index(obj.cls), (x1 + x2) / 2 / cam.width,
+                     (y1 + y2) / 2 / cam.height, (x2 - x1) / cam.width, (y2 - y1) / cam.height])
+    return rows
+
+
+def render_world(job):
+    """Render and write the images of one world; returns the class ids it labelled."""
+    out, seed, split, world, indices = job
+    spec, cam = SPLITS[split], CameraConfig()
+    rng = np.random.default_rng([seed, spec.stream, world])
+    client = p.connect(p.DIRECT)
+    try:
+        info = build_random_world(client, rng, spec)
+        classes = []
+        for k in indices:
+            eye, R_cam = camera_pose(rng, info, cam)
+            occluder = add_occluder(client, rng, eye, info) \
+                if rng.random() < OCCLUDER_PROB else None
+            light = random_lighting(rng, spec, info.R_map_wall)
+            rgb, _, seg = render(client, cam, eye, R_cam, light, segmentation=True)
+            if occluder is not None:
+                p.removeBody(occluder, physicsClientId=client)
+            rows = labels_from_segmentation(seg, info, eye, R_cam, cam)
+            cv2.imwrite(str(Path(out) / 'images' / f'{k:06d}.png'),
+                        cv2.cvtColor(photometric(rgb, rng), cv2.COLOR_RGB2BGR))
+            (Path(out) / 'labels' / f'{k:06d}.txt').write_text(
+                ''.join(f'{int(r[0])} ' + ' '.join(f'{v:.6f}' for v in r[1:]) + '\n'
+                        for r in rows))
+            classes.extend(int(r[0]) for r in rows)
+        return classes
+    finally:
+        p.disconnect(client)
+
+
+def generate(out, n, seed=0, split='train', jobs=1, show_progress=True):
+    """Write ``n`` labelled images and ``meta.json`` to ``out``; returns the meta dict."""
+    if split not in SPLITS:
+        raise ValueError(f'unknown split {split!r}; expected one of {tuple(SPLITS)}')
+    out = Path(out)
+    (out / 'images').mkdir(parents=True, exist_ok=True)
+    (out / 'labels').mkdir(parents=True, exist_ok=True)
+    worlds = [(str(out), seed, split, w, range(w * IMAGES_PER_WORLD,
+                                               min((w + 1) * IMAGES_PER_WORLD, n)))
+              for w in range(-(-n // IMAGES_PER_WORLD))]
+    bar = tqdm(total=n, desc=f'dataset {split}', unit='img', disable=not show_progress)
+    counts = np.zeros(len(CLASSES), int)
+    with multiprocessing.get_context('spawn').Pool(jobs) if jobs > 1 else _Serial() as pool:
+        for job, classes in zip(worlds, pool.imap(render_world, worlds)):
+            counts += np.bincount(classes, minlength=len(CLASSES))
+            bar.update(len(job[4]))
+    bar.close()
+    meta = {'seed': seed, 'split': split, 'n': n, 'classes': list(CLASSES),
+            'boxes_per_class': counts.tolist(), 'images_per_world': IMAGES_PER_WORLD,
+            'split_spec': dataclasses.asdict(SPLITS[split]),
+            'heldout_policy': 'train and heldout use disjoint RNG streams (all textures), '
+                              'disjoint wall families and disjoint lighting ranges',
+            'camera': dataclasses.asdict(CameraConfig()), 'distance_m': list(DISTANCE_M),
+            'max_view_angle_deg': MAX_VIEW_ANGLE_DEG, 'occluder_prob': OCCLUDER_PROB,
+            'min_visible_px': MIN_VISIBLE_PX, 'min_visible_fraction': MIN_VISIBLE_FRACTION}
+    (out / 'meta.json').write_text(json.dumps(meta, indent=2))
+    return meta
+
+
+class _Serial:
+    """In-process stand-in for a worker pool (``imap`` and the context manager)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    @staticmethod
+    def imap(fn, items):
+        return map(fn, items)

@@ -1,0 +1,121 @@
+"""``uav-tilt vision dataset|train|eval|compress|profile`` (also ``python -m`` this module).
+
+Every sub-command prints one JSON object on stdout (progress bars go to stderr).
+"""
+
+import argparse
+import json
+import sys
+
+MODELS = 'models'
+
+
+def _dataset(a):
+    from uav_tilt_vision.dataset import generate
+    meta = generate(a.out, a.n, a.seed, a.split, a.jobs)
+    return {k: meta[k] for k in ('seed', 'split', 'n', 'classes', 'boxes_per_class')}
+
+
+def _train(a):
+    from uav_tilt_vision.detector import load_model, save_model
+    from uav_tilt_vision.train import card_path, train
+    card = train(a.data, a.out, a.epochs, a.seed, a.width_mult, batch=a.batch, lr=a.lr,
+                 device=a.device, eval_dir=a.eval_data, crop=a.crop,
+                 model=load_model(a.init) if a.init else None,
+                 log=lambda s: print(s, file=sys.stderr, flush=True))
+    if a.init:  # a continued run: its card names the stage it started from
+        prior = json.loads(card_path(a.init).read_text())
+        card['init'] = {k: prior.get(k) for k in ('epochs', 'seed', 'lr', 'crop', 'init')}
+        card['total_epochs'] = a.epochs + prior.get('total_epochs', prior['epochs'])
+        save_model(a.out, load_model(a.out), card)
+        card_path(a.out).write_text(json.dumps(card, indent=2))
+    return {k: v for k, v in card.items() if k != 'loss_history'}
+
+
+def _eval(a):
+    from uav_tilt_vision.backends import load_detector
+    from uav_tilt_vision.train import evaluate
+    det = load_detector(a.model, a.backend)
+    return {**evaluate(det, a.data), 'model': a.model, 'backend_used': det.backend}
+
+
+def _compress(a):
+    from uav_tilt_vision.compress import compress
+    return compress(a.model, a.data, a.out_dir, a.ratio, a.finetune_epochs, a.seed,
+                    a.calib_images, a.eval_data, crop=a.crop)
+
+
+def _profile(a):
+    from uav_tilt_vision.profile import report
+    return report(a.model)
+
+
+def parser():
+    """The argparse parser of the vision sub-commands."""
+    ap = argparse.ArgumentParser(prog='uav-tilt vision', description=__doc__)
+    ap.add_argument('--threads', type=int, default=0, help='torch CPU threads (0: default)')
+    sub = ap.add_subparsers(dest='command', required=True)
+    d = sub.add_parser('dataset', help='render a labelled, domain-randomised image set')
+    d.add_argument('--out', required=True)
+    d.add_argument('--n', type=int, required=True)
+    d.add_argument('--seed', type=int, default=0)
+    d.add_argument('--split', choices=('train', 'heldout'), default='train')
+    d.add_argument('--jobs', type=int, default=1, help='render processes')
+    d.set_defaults(run=_dataset)
+    t = sub.add_parser('train', help='train the fp32 detector; writes weights + model card')
+    t.add_argument('--data', required=True)
+    t.add_argument('--out', default=f'{MODELS}/detector_fp32.pt')
+    t.add_argument('--epochs', type=int, default=16)
+    t.add_argument('--seed', type=int, default=0)
+    t.add_argument('--width-mult', type=float, default=0.25)
+    t.add_argument('--batch', type=int, default=16)
+    t.add_argument('--lr', type=float, default=3e-3)
+    t.add_argument('--device', default='auto')
+    t.add_argument('--eval-data', help='held-out set whose mAP goes in the model card')
+    t.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
+                   help='train on object-centred W x H windows (multiples of 32)')
+    t.add_argument('--init', help='continue from this checkpoint (its card is cited)')
+    t.set_defaults(run=_train)
+    e = sub.add_parser('eval', help='COCO mAP of a model on a YOLO-format set')
+    e.add_argument('--data', required=True)
+    e.add_argument('--model', default=f'{MODELS}/detector_fp32.pt')
+    e.add_argument('--backend', default='auto', choices=('auto', 'torch', 'onnxruntime'))
+    e.set_defaults(run=_eval)
+    c = sub.add_parser('compress', help='prune + fine-tune, then int8 ONNX (static QDQ)')
+    c.add_argument('--model', default=f'{MODELS}/detector_fp32.pt')
+    c.add_argument('--data', required=True, help='training set (fine-tuning, calibration)')
+    c.add_argument('--out-dir', default=MODELS)
+    c.add_argument('--ratio', type=float, default=0.5, help='channel pruning ratio')
+    c.add_argument('--finetune-epochs', type=int, default=4)
+    c.add_argument('--seed', type=int, default=0)
+    c.add_argument('--calib-images', type=int, default=128)
+    c.add_argument('--eval-data', help='held-out set evaluated for every stage')
+    c.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
+                   help='fine-tune on object-centred W x H windows')
+    c.set_defaults(run=_compress)
+    p = sub.add_parser('profile', help='params and MACs per layer type vs YOLOv3-tiny')
+    p.add_argument('--model', help='a .pt model to profile too')
+    p.set_defaults(run=_profile)
+    return ap
+
+
+def register(sub):
+    """Add ``uav-tilt vision ...``: everything after ``vision`` goes to :func:`main`."""
+    p = sub.add_parser('vision', add_help=False, prefix_chars='\0',
+                       help='detector data set, training, evaluation, compression, profile')
+    p.add_argument('args', nargs=argparse.REMAINDER)
+    p.set_defaults(func=lambda a: main(a.args))
+
+
+def main(argv=None):
+    """Parse ``argv``, run the sub-command, print its JSON result; returns 0."""
+    a = parser().parse_args(argv)
+    if a.threads:
+        import torch
+        torch.set_num_threads(a.threads)
+    print(json.dumps(a.run(a), indent=2))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
