@@ -16,10 +16,10 @@ from uav_tilt_vision.detector import Detector, load_model, save_model
 torch.set_num_threads(2)
 
 
-def trained_like(seed=0):
+def trained_like(seed=0, scales=2):
     """A small Detector with non-trivial BN statistics (so BN folding is exercised)."""
     torch.manual_seed(seed)
-    model = Detector(3, 0.25)
+    model = Detector(3, 0.25, scales=scales)
     for m in model.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-0.2, 0.2)
@@ -41,24 +41,26 @@ def images_dir(tmp_path_factory):
     return root
 
 
-def test_pruning_shrinks_and_round_trips(tmp_path):
-    model = trained_like()
+@pytest.mark.parametrize('scales', [2, 3])
+def test_pruning_shrinks_and_round_trips(tmp_path, scales):
+    model = trained_like(scales=scales)
     before = compress.size_stats(model)
     compress.prune(model, 0.5)
     after = compress.size_stats(model)
     assert after['params'] < 0.35 * before['params'] and after['macs'] < 0.7 * before['macs']
     x = torch.rand(2, 3, 256, 320)
     heads = model(x)
-    assert [h.shape for h in heads] == [(2, 24, 8, 10), (2, 24, 16, 20)]
+    assert [h.shape for h in heads] == [(2, 24, 8, 10), (2, 24, 16, 20), (2, 24, 32, 40)][:scales]
     save_model(tmp_path / 'p.pt', model)
     reloaded = load_model(tmp_path / 'p.pt')
-    assert reloaded.channels() == model.channels() != Detector(3, 0.25).channels()
+    assert reloaded.channels() == model.channels() != Detector(3, 0.25, scales=scales).channels()
     for a, b in zip(reloaded(x), heads):
         torch.testing.assert_close(a, b)
 
 
-def test_onnx_export_matches_torch_and_int8_stays_close(tmp_path, images_dir):
-    model = trained_like(1)
+@pytest.mark.parametrize('scales', [2, 3])
+def test_onnx_export_matches_torch_and_int8_stays_close(tmp_path, images_dir, scales):
+    model = trained_like(1, scales)
     fp32, int8 = tmp_path / 'm.onnx', tmp_path / 'm_int8.onnx'
     compress.export_onnx(model, fp32, 'm.pt')
     x = next(compress.calibration_images(images_dir, 1, model.img_size))
@@ -66,6 +68,7 @@ def test_onnx_export_matches_torch_and_int8_stays_close(tmp_path, images_dir):
         ref = [h.numpy() for h in model(torch.from_numpy(x))]
     out = ort.InferenceSession(str(fp32), providers=['CPUExecutionProvider']).run(
         None, {'images': x})
+    assert len(out) == len(ref) == scales
     for a, b in zip(out, ref):
         np.testing.assert_allclose(a, b, atol=1e-3, rtol=1e-3)
     assert 'BatchNormalization' not in {n.op_type for n in onnx.load(str(fp32)).graph.node}
@@ -89,7 +92,7 @@ def test_onnx_export_matches_torch_and_int8_stays_close(tmp_path, images_dir):
 
 
 def test_backends_agree_and_fall_back(tmp_path, images_dir):
-    model = trained_like(2)
+    model = trained_like(2, scales=3)
     save_model(tmp_path / 'm.pt', model)
     compress.export_onnx(model, tmp_path / 'm.onnx', 'm.pt')
     rgb = cv2.imread(str(next((images_dir / 'images').iterdir())))[:, :, ::-1].copy()

@@ -15,11 +15,14 @@ torch.set_num_threads(2)
 INPUT = (1, 3, 256, 320)
 
 
-def test_head_shapes_for_camera_input():
-    model = Detector(num_classes=3, width_mult=0.25)
+@pytest.mark.parametrize('scales', [2, 3])
+def test_head_shapes_for_camera_input(scales):
+    model = Detector(num_classes=3, width_mult=0.25, scales=scales)
     heads = model(torch.zeros(2, 3, 256, 320))
-    # 3 anchors * (5 + 3 classes) = 24 channels; grids 320/32 x 256/32 and 320/16 x 256/16
-    assert [tuple(h.shape) for h in heads] == [(2, 24, 8, 10), (2, 24, 16, 20)]
+    # 3 anchors * (5 + 3 classes) = 24 channels; grids 320/s x 256/s for s = 32, 16 (, 8)
+    expect = [(2, 24, 8, 10), (2, 24, 16, 20), (2, 24, 32, 40)][:scales]
+    assert [tuple(h.shape) for h in heads] == expect
+    assert model.strides == (32, 16, 8)[:scales] and len(model.heads) == scales
 
 
 def test_reference_yolov3_tiny_architecture():
@@ -27,6 +30,11 @@ def test_reference_yolov3_tiny_architecture():
     assert model.channels() == list(REF_CHANNELS)
     n = sum(p.numel() for p in model.parameters())
     assert abs(n - 8.7e6) / 8.7e6 < 0.02
+    # the stride-8 branch of yolov3-tiny_3l.cfg: 1x1 256->128, 3x3 (128+128)->128, head
+    three = Detector(num_classes=80, width_mult=1.0, scales=3)
+    assert three.channels() == list(REF_CHANNELS) + [128, 128]
+    extra = 256 * 128 + 256 * 128 * 9 + 128 * 255 + 255 + 4 * 128
+    assert sum(p.numel() for p in three.parameters()) == n + extra
 
 
 def test_deployed_width_cuts_macs_at_least_4x():
@@ -35,16 +43,23 @@ def test_deployed_width_cuts_macs_at_least_4x():
     assert small['macs'] * 4 <= ref['macs']
 
 
-def test_wrong_channel_list_is_rejected():
+def test_wrong_channel_list_or_scales_are_rejected():
     with pytest.raises(ValueError):
         Detector(3, channels=[8] * 10)
+    with pytest.raises(ValueError):
+        Detector(3, channels=[8] * 11, scales=3)
+    with pytest.raises(ValueError):
+        Detector(3, scales=4)
 
 
-def test_save_load_round_trip_with_irregular_channels(tmp_path):
+@pytest.mark.parametrize('scales', [2, 3])
+def test_save_load_round_trip_with_irregular_channels(tmp_path, scales):
     torch.manual_seed(0)
-    channels = [5, 11, 13, 29, 37, 45, 70, 21, 33, 9, 27]
-    anchors = [[[40, 30], [60, 70], [100, 90]], [[8, 9], [15, 20], [25, 27]]]
-    model = Detector(num_classes=2, channels=channels, anchors=anchors, img_size=(320, 256))
+    channels = [5, 11, 13, 29, 37, 45, 70, 21, 33, 9, 27, 12, 14][:7 + 2 * scales]
+    anchors = [[[40, 30], [60, 70], [100, 90]], [[8, 9], [15, 20], [25, 27]],
+               [[4, 5], [6, 7], [8, 8]]][:scales]
+    model = Detector(num_classes=2, channels=channels, anchors=anchors, img_size=(320, 256),
+                     scales=scales)
     model.train()
     model(torch.rand(4, 3, 256, 320))  # move BN running statistics away from their defaults
     model.eval()

@@ -241,6 +241,22 @@ def test_target_reacquired_resumes_approach():
     flight.run_to(Mode.CONTACT, timeout_s=30.0)
 
 
+def test_contact_keeps_the_target_once_the_tool_hides_it():
+    cfg = MissionConfig()
+    flight = _in_mode(Mode.CONTACT, cfg)
+    # still far from the surface: a lost target is lost
+    flight.run_to(Mode.TARGET_LOST, target=None, timeout_s=5.0)
+    flight.step()
+    assert flight.mission.mode == Mode.CONTACT
+    flight.run_until(lambda f: f.mission._tool_hides_poi(), 30.0)
+    gap_m = (flight.p - P_POI) @ NORMAL - VEHICLE.tool_tip_x_m
+    assert gap_m == pytest.approx(cfg.tool_occlusion_range_m, abs=0.01)
+    # within the occlusion range the camera cannot see the POI: the push goes on
+    seen = len(flight.modes)
+    flight.run_to(Mode.HOLD, target=None, timeout_s=30.0)
+    assert flight.modes[seen - 1:] == [Mode.CONTACT, Mode.HOLD]
+
+
 def test_contact_lost_during_hold_counted_and_not_success():
     cfg = MissionConfig()
     flight = _in_mode(Mode.HOLD, cfg)

@@ -2,7 +2,6 @@
 import sys
 
 import rclpy
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 
 from uav_tilt_common.config import ConfigError, from_dict, to_flat
@@ -40,8 +39,9 @@ def run_node(node_factory, args=None):
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except RCLError:
-        # A callback that publishes while a signal shuts the context down is not an error.
+    except RuntimeError:
+        # A signal shuts the context down under the executor: a callback that publishes
+        # then raises RCLError, a message take a pybind RuntimeError. Neither is an error.
         if rclpy.ok():
             raise
     finally:

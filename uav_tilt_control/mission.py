@@ -68,6 +68,10 @@ class MissionConfig:
     contact_lost_s: float = param(0.1, lo=0.0, hi=5.0)
     hold_time_s: float = param(5.0, lo=0.0, hi=600.0)
     force_limit_n: float = param(15.0, lo=1.0, hi=100.0)
+    # Tool tip nearer the surface than this: the tool hides the POI from the eye-in-hand
+    # camera, so CONTACT keeps the last target frame (the target is static) instead of
+    # calling the target lost.
+    tool_occlusion_range_m: float = param(0.15, lo=0.0, hi=2.0)
     target_lost_hold_s: float = param(0.5, lo=0.05, hi=60.0)
     target_lost_retreat_s: float = param(3.0, lo=0.1, hi=600.0)
     odom_stale_s: float = param(0.1, lo=0.005, hi=5.0)
@@ -310,7 +314,7 @@ class Mission:
 
     def _tick_contact(self, target, f_n, stale):
         cfg = self.config
-        if self._check_target_lost():
+        if not self._tool_hides_poi() and self._check_target_lost():
             return
         self._track_target(target)
         self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.contact_threshold_n else 0
@@ -439,6 +443,10 @@ class Mission:
 
     def _time_in_mode(self):
         return self._now_s - self._t_mode_s
+
+    def _tool_hides_poi(self):
+        p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
+        return p_t[2] - self.vehicle.tool_tip_x_m < self.config.tool_occlusion_range_m
 
     def _target_usable(self, target):
         return target is not None and bool(target[3])

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from uav_tilt_vision.boxes import decode, letterbox
-from uav_tilt_vision.detector import STRIDES, load_model, postprocess
+from uav_tilt_vision.boxes import letterbox
+from uav_tilt_vision.detector import STRIDES, decode_heads, load_model, postprocess
 
 BACKENDS = ('torch', 'onnxruntime')
 
@@ -65,8 +65,8 @@ class OnnxDetector:
         boxes = [letterbox(img, self.img_size) for img in images]
         x = np.stack([b[0] for b in boxes]).transpose(0, 3, 1, 2).astype(np.float32) / 255.0
         heads = self.session.run(None, {self.input_name: x})
-        dets = torch.cat([decode(torch.from_numpy(h), a, s)
-                          for h, a, s in zip(heads, self.anchors, STRIDES)], 1).numpy()
+        dets = decode_heads([torch.from_numpy(h) for h in heads], self.anchors,
+                            STRIDES).numpy()
         out = [postprocess(d, conf_thres, iou_thres, 100, s, p, img.shape)
                for d, (_, s, p), img in zip(dets, boxes, images)]
         return out[0] if single else out

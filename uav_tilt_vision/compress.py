@@ -34,7 +34,7 @@ def prune(model, ratio, round_to=8):
     example = torch.zeros(1, 3, model.img_size[1], model.img_size[0])
     pruner = tp.pruner.MetaPruner(
         model, example, importance=tp.importance.GroupMagnitudeImportance(p=2),
-        pruning_ratio=ratio, ignored_layers=[model.head0, model.head1], round_to=round_to)
+        pruning_ratio=ratio, ignored_layers=model.heads, round_to=round_to)
     pruner.step()
     return model
 
@@ -48,7 +48,8 @@ def export_onnx(model, path, source):
     model.eval()
     w, h = model.img_size
     torch.onnx.export(model, (torch.zeros(1, 3, h, w),), str(path), input_names=['images'],
-                      output_names=['head0', 'head1'], dynamic_axes={'images': {0: 'batch'}},
+                      output_names=[f'head{i}' for i in range(len(model.strides))],
+                      dynamic_axes={'images': {0: 'batch'}},
                       opset_version=ONNX_OPSET, dynamo=False)
     set_metadata(path, {'anchors': model.anchors.tolist(), 'img_size': list(model.img_size),
                         'num_classes': model.num_classes, 'source': source})

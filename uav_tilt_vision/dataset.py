@@ -4,8 +4,10 @@ Each world (wall, ground, 1-5 inspection objects, plain distractor panels) is bu
 ``uav_tilt_sim.world.build_world`` and photographed by the plant's camera model from
 ``IMAGES_PER_WORLD`` random poses: 0.4-4 m (log-uniform) from a point on the wall, up to
 45 deg off its normal, with roll jitter and, sometimes, an occluding bar in front. Lighting,
-exposure, blur and sensor noise are drawn per image. Boxes are the tight bounds of each
-object's pixels in the simulator's segmentation, so occlusion and truncation are exact.
+exposure, blur and sensor noise are drawn per image. In ``VEHICLE_PROB`` of the images the
+camera is the vehicle's own eye-in-hand camera, so its tool (rod and tip) is in view as in
+flight, in front of the target at contact. Boxes are the tight bounds of each object's
+pixels in the simulator's segmentation, so occlusion and truncation are exact.
 
 Splits (``SPLITS``): ``train`` and ``heldout`` draw from disjoint RNG streams (object,
 wall and ground textures never repeat), disjoint wall texture families and disjoint
@@ -25,9 +27,12 @@ import pybullet as p
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim import textures
 from uav_tilt_sim.camera import CameraConfig, Lighting, render
+from uav_tilt_sim.plant import camera_rotation_in_base
 from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
+from uav_tilt_sim.vehicle_body import create_vehicle
 from uav_tilt_sim.world import build_world
 
 CLASSES = textures.OBJECT_CLASSES
@@ -40,6 +45,7 @@ MAX_VIEW_ANGLE_DEG = 45.0
 DISTANCE_M = (0.4, 4.0)
 PATCH_UV_M = ((-2.0, 0.3), (2.0, 3.1))   # where objects and panels go on the wall (u, v)
 OCCLUDER_PROB = 0.3
+VEHICLE_PROB = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,6 +156,17 @@ def add_occluder(client, rng, eye, info):
                                          rng.uniform(0.005, 0.05)], rng)
 
 
+def add_vehicle(client, eye, R_map_cam, vehicle=VehicleParams()):
+    """The vehicle posed so that its eye-in-hand camera is at (eye, R_map_cam); its body id."""
+    R_map_base = R_map_cam @ camera_rotation_in_base(vehicle.camera_pitch_rad).T
+    p_base = eye - R_map_base @ np.asarray(vehicle.camera_xyz_m)
+    body = create_vehicle(client, vehicle, p_base.tolist(), 0.0).body
+    p.resetBasePositionAndOrientation(body, p_base.tolist(),
+                                      Rotation.from_matrix(R_map_base).as_quat().tolist(),
+                                      physicsClientId=client)
+    return body
+
+
 def photometric(rgb, rng):
     """Exposure gain and gamma, optional Gaussian or motion blur, sensor noise."""
     img = np.clip(rgb.astype(np.float32) / 255.0 * np.exp(rng.uniform(-0.5, 0.4)), 0, 1)
@@ -205,12 +222,14 @@ def render_world(job):
         classes = []
         for k in indices:
             eye, R_cam = camera_pose(rng, info, cam)
-            occluder = add_occluder(client, rng, eye, info) \
-                if rng.random() < OCCLUDER_PROB else None
+            extra = [add_occluder(client, rng, eye, info)] \
+                if rng.random() < OCCLUDER_PROB else []
+            if rng.random() < VEHICLE_PROB:
+                extra.append(add_vehicle(client, eye, R_cam))
             light = random_lighting(rng, spec, info.R_map_wall)
             rgb, _, seg = render(client, cam, eye, R_cam, light, segmentation=True)
-            if occluder is not None:
-                p.removeBody(occluder, physicsClientId=client)
+            for body in extra:
+                p.removeBody(body, physicsClientId=client)
             rows = labels_from_segmentation(seg, info, eye, R_cam, cam)
             cv2.imwrite(str(Path(out) / 'images' / f'{k:06d}.png'),
                         cv2.cvtColor(photometric(rgb, rng), cv2.COLOR_RGB2BGR))
@@ -247,6 +266,7 @@ def generate(out, n, seed=0, split='train', jobs=1, show_progress=True):
                               'disjoint wall families and disjoint lighting ranges',
             'camera': dataclasses.asdict(CameraConfig()), 'distance_m': list(DISTANCE_M),
             'max_view_angle_deg': MAX_VIEW_ANGLE_DEG, 'occluder_prob': OCCLUDER_PROB,
+            'vehicle_prob': VEHICLE_PROB,
             'min_visible_px': MIN_VISIBLE_PX, 'min_visible_fraction': MIN_VISIBLE_FRACTION}
     (out / 'meta.json').write_text(json.dumps(meta, indent=2))
     return meta

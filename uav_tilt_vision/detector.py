@@ -8,14 +8,18 @@ Architecture (darknet ``yolov3-tiny.cfg``): eleven conv-BN-leaky(0.1) layers
     c7 1x1 -> c8 3x3 -> head0 (stride 32)
     c7 -> c9 1x1 -> upsample x2 -> concat(c4) -> c10 3x3 -> head1 (stride 16)
 
-The reference channel list is 16-32-64-128-256-512-1024-256-512-128-256;
+With ``scales=3`` (darknet ``yolov3-tiny_3l.cfg``) a third branch serves small objects:
+
+    c10 -> c11 1x1 -> upsample x2 -> concat(c3) -> c12 3x3 -> head2 (stride 8)
+
+The reference channel list is 16-32-64-128-256-512-1024-256-512-128-256 (-128-128);
 ``width_mult`` scales it, and ``channels`` gives every conv explicitly so that a
 structurally pruned model (irregular counts) can be rebuilt by ``load_model``.
 
 Input size: the 320x240 camera image is letterboxed to 320x256 (8 px grey bands
 top and bottom, scale 1): both dimensions must be multiples of the largest
 stride 32, and 256 is the smallest such height that keeps the full image
-unscaled. Grids are 10x8 (stride 32) and 20x16 (stride 16).
+unscaled. Grids are 10x8 (stride 32), 20x16 (stride 16) and 40x32 (stride 8).
 """
 
 import numpy as np
@@ -25,16 +29,24 @@ from torch import nn
 from uav_tilt_vision.boxes import decode, letterbox, nms, unscale_boxes
 
 REF_CHANNELS = (16, 32, 64, 128, 256, 512, 1024, 256, 512, 128, 256)
-STRIDES = (32, 16)
+REF_CHANNELS_3L = REF_CHANNELS + (128, 128)
+STRIDES = (32, 16, 8)
 IMG_SIZE = (320, 256)
-# Per-scale anchors (w, h) in input pixels, [stride 32, stride 16]; sized for the small and
-# medium objects of 320-px inspection images (train.py replaces them by k-means on the labels).
-DEFAULT_ANCHORS = (((48, 40), (72, 80), (128, 112)), ((10, 12), (18, 22), (30, 32)))
+# Per-scale anchors (w, h) in input pixels, [stride 32, stride 16, stride 8]; sized for the
+# objects of 320-px inspection images (train.py replaces them by k-means on the labels).
+DEFAULT_ANCHORS = {2: (((48, 40), (72, 80), (128, 112)), ((10, 12), (18, 22), (30, 32))),
+                   3: (((60, 60), (90, 90), (128, 124)), ((26, 28), (36, 38), (46, 48)),
+                       ((9, 10), (13, 15), (18, 20)))}
 
 
-def scaled_channels(width_mult):
+def reference_channels(scales=2):
+    """The darknet channel list of the ``scales``-head YOLOv3-tiny."""
+    return list(REF_CHANNELS if scales == 2 else REF_CHANNELS_3L)
+
+
+def scaled_channels(width_mult, scales=2):
     """Reference channel list times ``width_mult``, rounded to multiples of 8 (>= 8)."""
-    return [max(8, int(round(c * width_mult / 8)) * 8) for c in REF_CHANNELS]
+    return [max(8, int(round(c * width_mult / 8)) * 8) for c in reference_channels(scales)]
 
 
 class ConvBNAct(nn.Sequential):
@@ -46,18 +58,24 @@ class ConvBNAct(nn.Sequential):
 
 
 class Detector(nn.Module):
-    """YOLOv3-tiny family: ``forward`` returns raw heads [(B, A*(5+C), H/32, W/32), (.., /16)]."""
+    """YOLOv3-tiny family: ``forward`` returns raw heads [(B, A*(5+C), H/32, W/32), (.., /16)]
+    and, with ``scales=3``, (.., /8)."""
 
-    def __init__(self, num_classes=80, width_mult=1.0, channels=None, anchors=DEFAULT_ANCHORS,
-                 img_size=IMG_SIZE):
+    def __init__(self, num_classes=80, width_mult=1.0, channels=None, anchors=None,
+                 img_size=IMG_SIZE, scales=2):
         super().__init__()
-        ch = list(channels) if channels is not None else scaled_channels(width_mult)
-        if len(ch) != len(REF_CHANNELS):
-            raise ValueError(f'channels must list {len(REF_CHANNELS)} convs, got {len(ch)}')
-        anchors = np.asarray(anchors, dtype=np.float64).reshape(len(STRIDES), -1, 2)
+        if scales not in (2, 3):
+            raise ValueError(f'scales must be 2 or 3, got {scales}')
+        ch = list(channels) if channels is not None else scaled_channels(width_mult, scales)
+        n_convs = len(reference_channels(scales))
+        if len(ch) != n_convs:
+            raise ValueError(f'channels must list {n_convs} convs, got {len(ch)}')
+        anchors = DEFAULT_ANCHORS[scales] if anchors is None else anchors
+        anchors = np.asarray(anchors, dtype=np.float64).reshape(scales, -1, 2)
         self.num_classes = int(num_classes)
         self.width_mult = float(width_mult)
         self.img_size = tuple(int(v) for v in img_size)
+        self.strides = STRIDES[:scales]
         self.register_buffer('anchors', torch.tensor(anchors, dtype=torch.float32))
         n_out = anchors.shape[1] * (5 + self.num_classes)
         ins = [3] + ch[:6]
@@ -71,43 +89,59 @@ class Detector(nn.Module):
         self.up = nn.Upsample(scale_factor=2, mode='nearest')
         self.c10 = ConvBNAct(ch[9] + ch[4], ch[10], 3)
         self.head1 = nn.Conv2d(ch[10], n_out, 1)
+        if scales == 3:
+            self.c11 = ConvBNAct(ch[10], ch[11], 1)
+            self.c12 = ConvBNAct(ch[11] + ch[3], ch[12], 3)
+            self.head2 = nn.Conv2d(ch[12], n_out, 1)
         self._init_head_bias()
+
+    @property
+    def heads(self):
+        """The 1x1 detection convs, coarsest first."""
+        return [self.head0, self.head1] + ([self.head2] if len(self.strides) == 3 else [])
+
+    def _convs(self):
+        extra = [self.c11, self.c12] if len(self.strides) == 3 else []
+        return list(self.backbone) + [self.c7, self.c8, self.c9, self.c10] + extra
 
     def _init_head_bias(self):
         # Objectness prior ~1e-2 and class prior 1/C (focal-loss paper / YOLOv5) so the
         # first steps are not dominated by the huge number of background cells.
-        for head in (self.head0, self.head1):
+        for head in self.heads:
             b = head.bias.data.view(self.anchors.shape[1], -1)
             b[:, 4] = float(np.log(0.01 / 0.99))
             b[:, 5:] = float(np.log(0.6 / max(self.num_classes - 0.99, 1.0)))
 
     def channels(self):
         """Actual output channels of c0..c10 (read from the modules, so pruning is reflected)."""
-        convs = list(self.backbone) + [self.c7, self.c8, self.c9, self.c10]
-        return [int(m[0].out_channels) for m in convs]
+        return [int(m[0].out_channels) for m in self._convs()]
 
     def config(self):
         """Constructor arguments that rebuild this architecture (JSON-serialisable)."""
         return {'num_classes': self.num_classes, 'width_mult': self.width_mult,
                 'channels': self.channels(), 'anchors': self.anchors.tolist(),
-                'img_size': list(self.img_size)}
+                'img_size': list(self.img_size), 'scales': len(self.strides)}
 
     def forward(self, x):
         """Raw head logits for a (B, 3, H, W) float input in [0, 1]."""
+        routes = []
         for i in range(5):
             x = self.backbone[i](x)
-            if i == 4:
-                route = x
+            routes.append(x)
             x = self.pool(x)
         x = self.backbone[6](self.pool_s1(self.backbone[5](x)))
         x = self.c7(x)
-        out0 = self.head0(self.c8(x))
-        y = torch.cat([self.up(self.c9(x)), route], 1)
-        return [out0, self.head1(self.c10(y))]
+        out = [self.head0(self.c8(x))]
+        y = self.c10(torch.cat([self.up(self.c9(x)), routes[4]], 1))
+        out.append(self.head1(y))
+        if len(self.strides) == 3:
+            y = self.c12(torch.cat([self.up(self.c11(y)), routes[3]], 1))
+            out.append(self.head2(y))
+        return out
 
     def decode(self, heads):
         """(B, N, 5+C) boxes xyxy in input pixels + objectness + class probabilities."""
-        return torch.cat([decode(h, a, s) for h, a, s in zip(heads, self.anchors, STRIDES)], 1)
+        return decode_heads(heads, self.anchors, self.strides)
 
     @torch.no_grad()
     def predict(self, images, conf_thres=0.25, iou_thres=0.45, max_det=100):
@@ -128,6 +162,11 @@ class Detector(nn.Module):
         self.train(was_training)
         return [postprocess(d, conf_thres, iou_thres, max_det, s, p, img.shape)
                 for d, (_, s, p), img in zip(dets, boxes, images)]
+
+
+def decode_heads(heads, anchors, strides):
+    """All heads decoded and concatenated: (B, N, 5+C), see ``boxes.decode``."""
+    return torch.cat([decode(h, a, s) for h, a, s in zip(heads, anchors, strides)], 1)
 
 
 def postprocess(det, conf_thres, iou_thres, max_det, scale, pad, orig_shape):

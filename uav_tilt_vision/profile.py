@@ -6,8 +6,6 @@ element (scale and shift); activations, pooling, padding and upsampling only com
 or copy and count 0 MACs.
 """
 
-import json
-
 import torch
 from torch import nn
 
@@ -74,25 +72,14 @@ def profile_model(model, input_shape):
     return {'params': total_p, 'macs': total_m, 'by_type': by_type, 'layers': layers}
 
 
-def report(model_path=None):
-    """Summaries (params, MACs, by_type) of the reference YOLOv3-tiny (80 classes) and the
-    deployed width at 320x256, plus the ``Detector`` saved at ``model_path`` when given."""
+def report(model_paths=()):
+    """Summaries (params, MACs, by_type) at 320x256 of the reference YOLOv3-tiny (80 classes),
+    its stride-8 variant and each ``Detector`` checkpoint in ``model_paths``."""
     models = [('yolov3_tiny_ref_80cls', Detector(80, 1.0)),
-              ('deployed_w0.25_3cls', Detector(3, 0.25))]
-    if model_path:
-        models.append((str(model_path), load_model(model_path)))
-    shape = (1, 3, 256, 320)
+              ('yolov3_tiny_3l_ref_80cls', Detector(80, 1.0, scales=3))]
+    models += [(str(path), load_model(path)) for path in model_paths]
     out = {}
     for label, model in models:
-        prof = profile_model(model, shape)
+        prof = profile_model(model, (1, 3, model.img_size[1], model.img_size[0]))
         out[label] = {k: prof[k] for k in ('params', 'macs', 'by_type')}
     return out
-
-
-def main():
-    """Print ``report()`` as JSON."""
-    print(json.dumps(report(), indent=2))
-
-
-if __name__ == '__main__':
-    main()

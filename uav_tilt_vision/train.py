@@ -4,8 +4,8 @@
 seeded loader order and augmentation drawn from (seed, epoch, index).
 """
 
-import argparse
 import json
+import math
 import random
 import subprocess
 from pathlib import Path
@@ -60,14 +60,18 @@ def num_classes_of(dataset, meta):
 
 def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_SIZE, batch=16,
           device='auto', lr=3e-3, weight_decay=5e-4, augment=True, hflip=False, anchors=None,
-          eval_dir=None, workers=0, log=print, model=None, crop=None):
+          eval_dir=None, workers=0, log=print, model=None, crop=None, ema_decay=0.999,
+          scales=2):
     """Train a ``Detector`` and write weights (``save_model``) plus a model card JSON beside them.
 
     ``anchors`` None = k-means on the training labels (defaults when too few boxes).
+    ``scales``: detection heads of a new model (2: YOLOv3-tiny, 3: its stride-8 variant).
     ``model``: fine-tune this model (e.g. a pruned one) instead of a new one; it keeps its
-    anchors and ``width_mult`` and ``anchors`` are then unused.
+    anchors and ``width_mult``, ``anchors`` and ``scales`` are then unused.
     ``crop`` (w, h): train on object-centred windows of the input (``yolo_data.random_crop``).
     ``eval_dir``: optional YOLO-format set evaluated at the end (metrics go in the card).
+    ``ema_decay``: the weights written (and left in ``model``) are an exponential moving
+    average of the trained ones (``ema_average``); 0 keeps the last step's weights.
     Returns the model card dict.
     """
     torch.manual_seed(seed)
@@ -82,11 +86,12 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     if model is None:
         if anchors is None:
             try:
-                anchors = kmeans_anchors(ds.label_wh())
+                anchors = kmeans_anchors(ds.label_wh(), num_scales=scales)
             except ValueError:
-                anchors = DEFAULT_ANCHORS
-        model = Detector(n_cls, width_mult, anchors=anchors, img_size=img_size)
-    model = model.to(dev)
+                anchors = DEFAULT_ANCHORS[scales]
+        model = Detector(n_cls, width_mult, anchors=anchors, img_size=img_size, scales=scales)
+    # channels_last: oneDNN's convolutions and their gradients run ~1.3x faster on CPU
+    model = model.to(dev, memory_format=torch.channels_last)
     loss_fn = YoloLoss(model.anchors).to(dev)
     loader = torch.utils.data.DataLoader(
         ds, batch_size=batch, shuffle=True, collate_fn=collate, num_workers=workers,
@@ -98,29 +103,35 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
                             lr=lr, weight_decay=weight_decay)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=epochs * len(loader),
                                                 pct_start=0.15)
+    ema = torch.optim.swa_utils.AveragedModel(model, avg_fn=ema_average(ema_decay),
+                                              use_buffers=True)
     history = []
     model.train()
     for epoch in progress(range(epochs), desc='train', unit='epoch'):
         ds.set_epoch(epoch)
         total, parts = 0.0, {'box': 0.0, 'obj': 0.0, 'cls': 0.0}
         for images, targets in loader:
-            loss, comp = loss_fn(model(images.to(dev, non_blocking=True)), targets)
+            images = images.to(dev, non_blocking=True, memory_format=torch.channels_last)
+            loss, comp = loss_fn(model(images), targets)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
             sched.step()
+            ema.update_parameters(model)
             total += loss.item()
             parts = {k: parts[k] + comp[k] for k in parts}
         history.append(total / len(loader))
         log(f'epoch {epoch + 1}/{epochs} loss {history[-1]:.4f} '
             + ' '.join(f'{k} {v / len(loader):.4f}' for k, v in parts.items()))
-    model.eval()
+    model.load_state_dict(ema.module.state_dict())
+    model = model.to(memory_format=torch.contiguous_format).eval()
     card = {'data_dir': str(data_dir), 'data_seed': meta.get('seed'),
             'classes': meta.get('classes'), 'num_classes': n_cls, 'epochs': epochs,
             'seed': seed, 'width_mult': model.width_mult, 'img_size': list(model.img_size),
-            'batch': batch, 'crop': list(crop) if crop else None,
-            'lr': lr, 'device': str(dev), 'anchors': model.anchors.tolist(),
-            'channels': model.channels(), 'params': sum(p.numel() for p in params),
+            'scales': len(model.strides), 'batch': batch, 'crop': list(crop) if crop else None,
+            'lr': lr, 'ema_decay': ema_decay, 'device': str(dev),
+            'anchors': model.anchors.tolist(), 'channels': model.channels(),
+            'params': sum(p.numel() for p in params),
             'final_loss': history[-1] if history else None, 'loss_history': history,
             'metrics': evaluate(model, eval_dir) if eval_dir else None,
             'git_commit': git_commit()}
@@ -128,6 +139,20 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     save_model(out_path, model, card)
     card_path(out_path).write_text(json.dumps(card, indent=2))
     return card
+
+
+def ema_average(decay, ramp_steps=500):
+    """``AveragedModel`` update: EMA whose decay ramps up as ``decay * (1 - exp(-n / ramp))``
+    (YOLOv5's ModelEMA), so that the random initialisation is forgotten quickly.
+
+    Integer buffers (BatchNorm's batch counter) follow the model.
+    """
+    def avg(averaged, current, n_averaged):
+        if not averaged.is_floating_point():
+            return current
+        d = decay * (1.0 - math.exp(-float(n_averaged) / ramp_steps))
+        return averaged * d + current * (1.0 - d)
+    return avg
 
 
 def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
@@ -143,27 +168,3 @@ def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
         preds.extend(model.predict(images, conf_thres, iou_thres))
         gts.extend(ds.ground_truth(start + k, img.shape) for k, img in enumerate(images))
     return mean_ap(preds, gts)
-
-
-def main(argv=None):
-    """``python -m uav_tilt_vision.train DATA OUT [--epochs N ...]``; prints the model card."""
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument('data_dir')
-    ap.add_argument('out_path')
-    ap.add_argument('--epochs', type=int, default=50)
-    ap.add_argument('--seed', type=int, default=0)
-    ap.add_argument('--width-mult', type=float, default=0.25)
-    ap.add_argument('--batch', type=int, default=16)
-    ap.add_argument('--lr', type=float, default=3e-3)
-    ap.add_argument('--device', default='auto')
-    ap.add_argument('--hflip', action='store_true', help='only for mirror-symmetric classes')
-    ap.add_argument('--eval-dir')
-    ap.add_argument('--workers', type=int, default=0)
-    a = ap.parse_args(argv)
-    card = train(a.data_dir, a.out_path, a.epochs, a.seed, a.width_mult, batch=a.batch,
-                 device=a.device, lr=a.lr, hflip=a.hflip, eval_dir=a.eval_dir, workers=a.workers)
-    print(json.dumps({k: v for k, v in card.items() if k != 'loss_history'}, indent=2))
-
-
-if __name__ == '__main__':
-    main()

@@ -20,7 +20,7 @@ def _train(a):
     from uav_tilt_vision.detector import load_model, save_model
     from uav_tilt_vision.train import card_path, train
     card = train(a.data, a.out, a.epochs, a.seed, a.width_mult, batch=a.batch, lr=a.lr,
-                 device=a.device, eval_dir=a.eval_data, crop=a.crop,
+                 device=a.device, eval_dir=a.eval_data, crop=a.crop, scales=a.scales,
                  model=load_model(a.init) if a.init else None,
                  log=lambda s: print(s, file=sys.stderr, flush=True))
     if a.init:  # a continued run: its card names the stage it started from
@@ -67,7 +67,9 @@ def parser():
     t.add_argument('--out', default=f'{MODELS}/detector_fp32.pt')
     t.add_argument('--epochs', type=int, default=16)
     t.add_argument('--seed', type=int, default=0)
-    t.add_argument('--width-mult', type=float, default=0.25)
+    t.add_argument('--width-mult', type=float, default=0.5)
+    t.add_argument('--scales', type=int, default=3, choices=(2, 3),
+                   help='detection heads: 2 = YOLOv3-tiny, 3 = with a stride-8 head')
     t.add_argument('--batch', type=int, default=16)
     t.add_argument('--lr', type=float, default=3e-3)
     t.add_argument('--device', default='auto')
@@ -94,7 +96,9 @@ def parser():
                    help='fine-tune on object-centred W x H windows')
     c.set_defaults(run=_compress)
     p = sub.add_parser('profile', help='params and MACs per layer type vs YOLOv3-tiny')
-    p.add_argument('--model', help='a .pt model to profile too')
+    p.add_argument('--model', nargs='*', default=[f'{MODELS}/detector_fp32.pt',
+                                                  f'{MODELS}/detector_pruned.pt'],
+                   help='.pt models to profile beside the references')
     p.set_defaults(run=_profile)
     return ap
 

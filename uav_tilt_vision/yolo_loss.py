@@ -58,7 +58,7 @@ class YoloLoss(nn.Module):
     """Callable ``loss(heads, targets) -> (total, {'box', 'obj', 'cls'})``."""
 
     def __init__(self, anchors, anchor_iou=0.25, box_gain=0.05, obj_gain=1.0,
-                 cls_gain=0.5, balance=(1.0, 1.0)):
+                 cls_gain=0.5, balance=(1.0, 1.0, 1.0)):
         super().__init__()
         self.register_buffer('anchors', torch.as_tensor(anchors, dtype=torch.float32))
         self.anchor_iou = anchor_iou
