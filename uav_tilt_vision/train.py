@@ -15,7 +15,8 @@ import torch
 
 from uav_tilt_vision.detector import DEFAULT_ANCHORS, IMG_SIZE, Detector, save_model
 from uav_tilt_vision.metrics import mean_ap
-from uav_tilt_vision.yolo_data import YoloDataset, collate, kmeans_anchors, read_meta
+from uav_tilt_vision.yolo_data import (HSV_GAINS, YoloDataset, collate, kmeans_anchors,
+                                       read_meta)
 from uav_tilt_vision.yolo_loss import YoloLoss
 
 
@@ -61,7 +62,7 @@ def num_classes_of(dataset, meta):
 def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_SIZE, batch=16,
           device='auto', lr=3e-3, weight_decay=5e-4, augment=True, hflip=False, anchors=None,
           eval_dir=None, workers=0, log=print, model=None, crop=None, ema_decay=0.999,
-          scales=2):
+          scales=2, hsv=HSV_GAINS):
     """Train a ``Detector`` and write weights (``save_model``) plus a model card JSON beside them.
 
     ``anchors`` None = k-means on the training labels (defaults when too few boxes).
@@ -69,6 +70,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     ``model``: fine-tune this model (e.g. a pruned one) instead of a new one; it keeps its
     anchors and ``width_mult``, ``anchors`` and ``scales`` are then unused.
     ``crop`` (w, h): train on object-centred windows of the input (``yolo_data.random_crop``).
+    ``hsv``: hue, saturation and value jitter of the augmentation.
     ``eval_dir``: optional YOLO-format set evaluated at the end (metrics go in the card).
     ``ema_decay``: the weights written (and left in ``model``) are an exponential moving
     average of the trained ones (``ema_average``); 0 keeps the last step's weights.
@@ -80,7 +82,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     dev = resolve_device(device)
     torch.backends.cudnn.benchmark = False
     ds = YoloDataset(data_dir, img_size, augment=augment, hflip=hflip, seed=seed,
-                     crop=crop if augment else None)
+                     crop=crop if augment else None, hsv=tuple(hsv))
     meta = read_meta(data_dir)
     n_cls = num_classes_of(ds, meta)
     if model is None:
@@ -129,6 +131,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
             'classes': meta.get('classes'), 'num_classes': n_cls, 'epochs': epochs,
             'seed': seed, 'width_mult': model.width_mult, 'img_size': list(model.img_size),
             'scales': len(model.strides), 'batch': batch, 'crop': list(crop) if crop else None,
+            'hsv': list(hsv),
             'lr': lr, 'ema_decay': ema_decay, 'device': str(dev),
             'anchors': model.anchors.tolist(), 'channels': model.channels(),
             'params': sum(p.numel() for p in params),

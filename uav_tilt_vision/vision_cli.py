@@ -19,13 +19,15 @@ def _dataset(a):
 def _train(a):
     from uav_tilt_vision.detector import load_model, save_model
     from uav_tilt_vision.train import card_path, train
+    from uav_tilt_vision.yolo_data import HSV_GAINS
     card = train(a.data, a.out, a.epochs, a.seed, a.width_mult, batch=a.batch, lr=a.lr,
                  device=a.device, eval_dir=a.eval_data, crop=a.crop, scales=a.scales,
+                 hsv=a.hsv or HSV_GAINS,
                  model=load_model(a.init) if a.init else None,
                  log=lambda s: print(s, file=sys.stderr, flush=True))
     if a.init:  # a continued run: its card names the stage it started from
         prior = json.loads(card_path(a.init).read_text())
-        card['init'] = {k: prior.get(k) for k in ('epochs', 'seed', 'lr', 'crop', 'init')}
+        card['init'] = {k: prior.get(k) for k in ('epochs', 'seed', 'lr', 'crop', 'hsv', 'init')}
         card['total_epochs'] = a.epochs + prior.get('total_epochs', prior['epochs'])
         save_model(a.out, load_model(a.out), card)
         card_path(a.out).write_text(json.dumps(card, indent=2))
@@ -77,6 +79,9 @@ def parser():
     t.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
                    help='train on object-centred W x H windows (multiples of 32)')
     t.add_argument('--init', help='continue from this checkpoint (its card is cited)')
+    t.add_argument('--hsv', type=float, nargs=3, metavar=('H', 'S', 'V'),
+                   help='hue, saturation, value jitter of the augmentation (fractions; '
+                        'default yolo_data.HSV_GAINS)')
     t.set_defaults(run=_train)
     e = sub.add_parser('eval', help='COCO mAP of a model on a YOLO-format set')
     e.add_argument('--data', required=True)

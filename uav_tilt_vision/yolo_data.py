@@ -16,6 +16,9 @@ from uav_tilt_vision.boxes import letterbox, wh_iou, xywh_to_xyxy, xyxy_to_xywh
 from uav_tilt_vision.detector import IMG_SIZE
 
 IMG_EXTS = ('.png', '.jpg', '.jpeg', '.bmp')
+# Hue, saturation and value jitter (fractions): the value range reaches well below the
+# rendered exposures, so that dimmer lighting than any seen in training stays familiar.
+HSV_GAINS = (0.015, 0.5, 0.5)
 
 
 def read_meta(root):
@@ -56,7 +59,7 @@ class YoloDataset(torch.utils.data.Dataset):
     """
 
     def __init__(self, root, img_size=IMG_SIZE, augment=False, hflip=False,
-                 hsv=(0.015, 0.5, 0.3), seed=0, crop=None):
+                 hsv=HSV_GAINS, seed=0, crop=None):
         self.root = Path(root)
         self.images = sorted(p for p in (self.root / 'images').iterdir()
                              if p.suffix.lower() in IMG_EXTS)
