@@ -1,5 +1,6 @@
 """Tests of the YOLOv3-tiny family detector, save/load, predict mapping and the profiler."""
 
+import json
 import math
 
 import numpy as np
@@ -7,6 +8,7 @@ import pytest
 import torch
 from torch import nn
 
+from uav_tilt_vision import vision_cli
 from uav_tilt_vision.detector import REF_CHANNELS, Detector, load_model, save_model
 from uav_tilt_vision.profile import profile_model
 
@@ -115,3 +117,22 @@ def test_profile_totals_cover_the_whole_detector():
     assert prof['params'] == sum(p.numel() for p in model.parameters())
     assert sum(v['params_share'] for v in prof['by_type'].values()) == pytest.approx(1.0)
     assert sum(v['macs_share'] for v in prof['by_type'].values()) == pytest.approx(1.0)
+
+
+def test_profile_cli_reports_the_references_and_the_given_models(tmp_path, capsys):
+    path = tmp_path / 'm.pt'
+    save_model(path, Detector(3, 0.25, scales=3))
+    assert vision_cli.main(['profile', '--model', str(path)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) == {'yolov3_tiny_ref_80cls', 'yolov3_tiny_3l_ref_80cls', str(path)}
+    # 3x3 weights of yolov3-tiny counted from its channel table: c0..c6, c8 (on c7), and
+    # c10 (on the upsampled c9 concatenated with c4)
+    c = REF_CHANNELS
+    ins = [3, *c[:6], c[7], c[9] + c[4]]
+    outs = [*c[:7], c[8], c[10]]
+    w3x3 = sum(9 * i * o for i, o in zip(ins, outs))
+    ref = out['yolov3_tiny_ref_80cls']
+    assert ref['by_type']['conv3x3']['params'] == w3x3
+    assert ref['by_type']['conv3x3']['params_share'] == pytest.approx(w3x3 / ref['params'])
+    for summary in out.values():
+        assert sum(v['macs_share'] for v in summary['by_type'].values()) == pytest.approx(1.0)
