@@ -1,6 +1,7 @@
 """vision_node through ROS: one target/pose per processed frame, bad input, and the pose
 against the ground truth with the plant hovering in front of the target."""
 import pathlib
+import threading
 
 import numpy as np
 import pytest
@@ -116,7 +117,8 @@ def test_without_a_model_every_frame_is_no_target_and_bad_input_is_counted(tmp_p
 
 
 def hover_scenario(tmp_path):
-    """The default scenario with the vehicle hovering, camera 1 m in front of the target."""
+    """The default scenario with the vehicle hovering (hover_driver holds its height),
+    camera 1 m in front of the target."""
     data = yaml.safe_load(DEFAULT_SCENARIO.read_text())
     cam_xyz = VehicleParams().camera_xyz_m
     data['start_xyz_m'] = [2.5 - 1.0 - cam_xyz[0], 0.0, 1.5 - cam_xyz[2]]
@@ -137,26 +139,33 @@ def camera_in_map(odom):
 
 
 def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, probe):
+    # The probe subscribes first, so that it is matched before vision's first pose.
+    odom = {}
+    probe.record(names.TARGET_POSE, PoseWithCovarianceStamped, KEEP_ALL)
+    probe.record(names.VISION_STATUS, DiagnosticArray, ros_qos.STATUS)
+    probe.record(names.CAMERA_COLOR, Image, KEEP_ALL)
+    probe.record(names.GROUND_TRUTH_TARGET, PoseStamped, ros_qos.LATCHED)
+    probe.node.create_subscription(
+        Odometry, names.GROUND_TRUTH_ODOM,
+        lambda m: odom.__setitem__(ros_msgs.stamp_ns(m.header.stamp), m), KEEP_ALL)
     plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
                   params={'scenario_file': str(hover_scenario(tmp_path)), 'rtf': 0.5})
     driver = start('uav_tilt_tools.hover_driver', '--ticks', '1000000000',
                    '--out', str(tmp_path / 'driver.json'), log_path=tmp_path / 'driver.log')
     vision = start('uav_tilt_vision.vision_node', log_path=tmp_path / 'vision.log',
                    params={'status_rate_hz': 10.0})
-    odom = {}
     try:
-        probe.record(names.TARGET_POSE, PoseWithCovarianceStamped, KEEP_ALL)
-        probe.record(names.VISION_STATUS, DiagnosticArray, ros_qos.STATUS)
-        probe.record(names.CAMERA_COLOR, Image, KEEP_ALL)
-        probe.record(names.GROUND_TRUTH_TARGET, PoseStamped, ros_qos.LATCHED)
-        probe.node.create_subscription(
-            Odometry, names.GROUND_TRUTH_ODOM,
-            lambda m: odom.__setitem__(ros_msgs.stamp_ns(m.header.stamp), m), KEEP_ALL)
         assert probe.spin_until(lambda: len(probe.messages[names.TARGET_POSE]) >= 60, 60.0), \
             (tmp_path / 'vision.log').read_text()
-        code, _ = stop(plant)
-        assert code == 0, (tmp_path / 'plant.log').read_text()
-        assert poses_are_one_per_processed_frame(probe, max_lost_fraction=0.05)
+        # The probe keeps taking poses while the plant shuts down (a pose left untaken in
+        # a reliable reader for long can be lost to it).
+        codes = []
+        stopper = threading.Thread(target=lambda: codes.append(stop(plant)[0]))
+        stopper.start()
+        probe.spin_until(lambda: not stopper.is_alive(), 30.0)
+        assert codes == [0], (tmp_path / 'plant.log').read_text()
+        assert poses_are_one_per_processed_frame(probe, max_lost_fraction=0.05), (
+            latest_status(probe).get("frames_processed"), len(probe.messages[names.TARGET_POSE]))
         assert vision.poll() is None
     finally:
         stop(plant)
@@ -167,7 +176,11 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
     poses = probe.messages[names.TARGET_POSE]
     stamps = [ros_msgs.stamp_ns(p.header.stamp) for p in poses]
     image_stamps = {ros_msgs.stamp_ns(m.header.stamp) for m in probe.messages[names.CAMERA_COLOR]}
-    assert set(stamps) <= image_stamps
+    # Poses carry the stamps of camera frames. The probe's camera subscription starts
+    # later than vision's and may lose some of the large best-effort frames: compare
+    # within the span it received.
+    seen = [s for s in stamps if min(image_stamps) <= s <= max(image_stamps)]
+    assert len(seen) >= 10 and len(set(seen) & image_stamps) >= 0.8 * len(seen)
     assert np.all(np.diff(stamps) > 0) and all(s % CAMERA_PERIOD_NS < 1000 for s in stamps)
 
     if latest_status(probe)['backend'] == 'none':
@@ -176,9 +189,14 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
     poi_map = ros_msgs.vector_of(gt.position)
     normal_map = Rotation.from_quat([gt.orientation.x, gt.orientation.y, gt.orientation.z,
                                      gt.orientation.w]).as_matrix()[:, 2]
+    # The target stays in view the whole time (hover_scenario).
+    found = [m for m in poses if m.pose.covariance[0] != -1.0]
+    assert len(found) >= 0.8 * len(poses), ''.join(
+        '0' if m.pose.covariance[0] == -1.0 else '1' for m in poses)
+    # Against the true camera pose at each stamp (the probe may miss some odom samples).
     pos_err, normal_err = [], []
-    for msg in poses:
-        if msg.pose.covariance[0] == -1.0:
+    for msg in found:
+        if ros_msgs.stamp_ns(msg.header.stamp) not in odom:
             continue
         p_cam_map, R_map_cam = camera_in_map(odom[ros_msgs.stamp_ns(msg.header.stamp)])
         o = msg.pose.pose.orientation
@@ -186,8 +204,7 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
         pos_err.append(np.linalg.norm(ros_msgs.vector_of(msg.pose.pose.position)
                                       - R_map_cam.T @ (poi_map - p_cam_map)))
         normal_err.append(np.degrees(np.arccos(np.clip(n @ (R_map_cam.T @ normal_map), -1, 1))))
-    # The target sits in the middle of the view the whole time.
-    assert len(pos_err) >= 0.8 * len(poses)
+    assert len(pos_err) >= 0.5 * len(found)
     assert np.median(pos_err) <= 0.01
     assert np.median(normal_err) <= 3.0
 

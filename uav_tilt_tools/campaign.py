@@ -2,6 +2,8 @@
 
 Runs in-process with the same cores as the nodes (uav_tilt_tools.inprocess), spread over
 the CPU cores, and prints JSON (DESIGN section 7): n, successes, success_rate, runs.
+Targets come from ground truth by default; ``--target-source vision`` renders the camera
+and runs the deployed detector pipeline in each run.
 """
 import json
 import multiprocessing
@@ -63,10 +65,16 @@ def run_one(job):
     """One campaign run (top level so that worker processes can pickle it)."""
     index, seed, target_source, duration_s = job
     # Imported here so that each worker process builds its own physics server.
-    from uav_tilt_tools.inprocess import run_mission
+    from uav_tilt_sim.plant import PlantCoreConfig
+    from uav_tilt_tools.inprocess import camera_vision, run_mission
     scenario = random_scenario(seed)
     config = from_dict(ControllerConfig, {'target_source': target_source})
-    result = run_mission(scenario, config, duration_s=duration_s)
+    plant_config, vision = PlantCoreConfig(), None
+    if target_source == 'vision':   # the node's deployed model (relative to the repository)
+        from uav_tilt_vision.vision_node import REPO, VisionNodeConfig
+        vision = camera_vision(plant_config, REPO / VisionNodeConfig().model_path)
+    result = run_mission(scenario, config, duration_s=duration_s, plant_config=plant_config,
+                         vision=vision)
     result.update(index=index, seed=seed, wall_yaw_deg=scenario.wall.yaw_deg,
                   wall_inclination_deg=scenario.wall.inclination_deg,
                   mass_scale=scenario.mismatch.mass_scale)
@@ -112,11 +120,14 @@ def register(sub):
     parser.add_argument('--workers', type=int, default=None)
     parser.add_argument('--duration', type=float, default=90.0,
                         help='simulated seconds allowed per mission')
+    parser.add_argument('--target-source', choices=('ground_truth', 'vision'),
+                        default='ground_truth',
+                        help='vision: render the camera and run the deployed detector '
+                             '(about 100 s of CPU per run)')
     parser.set_defaults(func=_run)
 
 
 def _run(args):
-    # Vision in the loop is not wired in-process yet: targets come from ground truth.
-    result = campaign(args.n, args.seed, args.workers, 'ground_truth', args.duration)
+    result = campaign(args.n, args.seed, args.workers, args.target_source, args.duration)
     print(json.dumps(result))
     return 0 if result['n'] else 1

@@ -1,5 +1,8 @@
 """A trivial lockstep client: answers every IMU tick with hover thrust, checks sensor sets.
 
+The thrust holds the first odom height with a PD term on the vertical axis only (the
+rotors spin up from rest, so pure hover thrust would leave the vehicle sinking).
+
 Used by the plant's ROS tests and by ``uav-tilt bench sim`` as the controller in another
 process. Writes a JSON report after ``--ticks`` answered ticks.
 """
@@ -17,7 +20,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import Imu, JointState
 
 from uav_tilt_common import names, ros_msgs, ros_qos
-from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_common.vehicle import GRAVITY, VehicleParams
+
+KP_Z, KD_Z = 4.0, 4.0    # 1/s^2, 1/s: a critically damped 2 rad/s height loop
 
 
 class HoverDriver(Node):
@@ -39,11 +44,22 @@ class HoverDriver(Node):
         self.complete_sets = 0      # ticks whose odom and wrench had arrived before the imu
         self.wall_first = None
         self.wall_last = None
+        self.z_ref_m = self.z_m = self.vz_m_s = None
 
     def _remember(self, topic):
         def callback(msg):
             self.latest[topic] = ros_msgs.stamp_ns(msg.header.stamp)
+            if topic == names.ODOM:
+                self.z_m, self.vz_m_s = msg.pose.pose.position.z, msg.twist.twist.linear.z
+                self.z_ref_m = self.z_m if self.z_ref_m is None else self.z_ref_m
         return callback
+
+    def thrust_per_rotor_n(self):
+        """Hover thrust scaled by a vertical PD on the odom height (none before odom)."""
+        if self.z_ref_m is None:
+            return self.thrust_n
+        accel = KP_Z * (self.z_ref_m - self.z_m) - KD_Z * self.vz_m_s
+        return self.thrust_n * (1.0 + float(np.clip(accel / GRAVITY, -0.5, 0.5)))
 
     def on_imu(self, msg):
         """One control tick: answer with hover thrust until ``ticks`` are done."""
@@ -58,7 +74,7 @@ class HoverDriver(Node):
         now = time.monotonic()
         self.wall_first = self.wall_first or now
         self.wall_last = now
-        self.pub.publish(ros_msgs.actuator_msg(np.full(4, self.thrust_n), (0.0, 0.0),
+        self.pub.publish(ros_msgs.actuator_msg(np.full(4, self.thrust_per_rotor_n()), (0.0, 0.0),
                                                msg.header.stamp))
 
     def report(self):

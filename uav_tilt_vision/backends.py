@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from uav_tilt_vision.boxes import letterbox
-from uav_tilt_vision.detector import STRIDES, decode_heads, load_model, postprocess
+from uav_tilt_vision.detector import (STRIDES, decode_heads, input_batch, load_model,
+                                      postprocess)
 
 BACKENDS = ('torch', 'onnxruntime')
 
@@ -62,13 +62,12 @@ class OnnxDetector:
     def predict(self, images, conf_thres=0.25, iou_thres=0.45):
         """(N, 6) [x1, y1, x2, y2, score, class] in image pixels; a list in -> a list out."""
         images, single = _as_list(images)
-        boxes = [letterbox(img, self.img_size) for img in images]
-        x = np.stack([b[0] for b in boxes]).transpose(0, 3, 1, 2).astype(np.float32) / 255.0
+        x, frames = input_batch(images, self.img_size)
         heads = self.session.run(None, {self.input_name: x})
         dets = decode_heads([torch.from_numpy(h) for h in heads], self.anchors,
                             STRIDES).numpy()
         out = [postprocess(d, conf_thres, iou_thres, 100, s, p, img.shape)
-               for d, (_, s, p), img in zip(dets, boxes, images)]
+               for d, (s, p), img in zip(dets, frames, images)]
         return out[0] if single else out
 
 

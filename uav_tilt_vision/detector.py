@@ -27,6 +27,7 @@ import torch
 from torch import nn
 
 from uav_tilt_vision.boxes import decode, letterbox, nms, unscale_boxes
+from uav_tilt_vision.exposure import normalize_exposure
 
 REF_CHANNELS = (16, 32, 64, 128, 256, 512, 1024, 256, 512, 128, 256)
 REF_CHANNELS_3L = REF_CHANNELS + (128, 128)
@@ -152,16 +153,21 @@ class Detector(nn.Module):
         """
         if isinstance(images, np.ndarray) and images.ndim == 3:
             images = [images]
-        boxes = [letterbox(img, self.img_size) for img in images]
-        device = self.anchors.device
-        x = torch.from_numpy(np.stack([b[0] for b in boxes])).to(device)
-        x = x.permute(0, 3, 1, 2).float() / 255.0
+        x, frames = input_batch(images, self.img_size)
         was_training = self.training
         self.eval()
-        dets = self.decode(self(x)).float().cpu().numpy()
+        dets = self.decode(self(torch.from_numpy(x).to(self.anchors.device))).float()
         self.train(was_training)
         return [postprocess(d, conf_thres, iou_thres, max_det, s, p, img.shape)
-                for d, (_, s, p), img in zip(dets, boxes, images)]
+                for d, (s, p), img in zip(dets.cpu().numpy(), frames, images)]
+
+
+def input_batch(images, img_size):
+    """The detector's input for uint8 RGB images: exposure-normalised, letterboxed, float
+    NCHW in [0, 1]; plus each image's (scale, pad) for mapping boxes back."""
+    boxes = [letterbox(normalize_exposure(img), img_size) for img in images]
+    x = np.stack([b[0] for b in boxes]).transpose(0, 3, 1, 2).astype(np.float32) / 255.0
+    return x, [(s, p) for _, s, p in boxes]
 
 
 def decode_heads(heads, anchors, strides):
@@ -181,9 +187,14 @@ def postprocess(det, conf_thres, iou_thres, max_det, scale, pad, orig_shape):
 
 
 def save_model(path, model, meta=None):
-    """Save architecture config, weights and a JSON-like ``meta`` dict to ``path``."""
-    torch.save({'config': model.config(), 'state_dict': model.state_dict(),
-                'meta': dict(meta or {})}, path)
+    """Save architecture config, weights and a JSON-like ``meta`` dict to ``path``.
+
+    Float weights are stored in half precision (half the file; ``load_model`` restores
+    float32), far finer than the int8 the deployed model runs at.
+    """
+    state = {k: v.half() if v.is_floating_point() else v
+             for k, v in model.state_dict().items()}
+    torch.save({'config': model.config(), 'state_dict': state, 'meta': dict(meta or {})}, path)
 
 
 def load_model(path, map_location='cpu'):

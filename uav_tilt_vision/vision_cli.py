@@ -1,4 +1,4 @@
-"""``uav-tilt vision dataset|train|eval|compress|profile`` (also ``python -m`` this module).
+"""``uav-tilt vision dataset|train|eval|compress|quantize|profile``; also ``python -m`` it.
 
 Every sub-command prints one JSON object on stdout (progress bars go to stderr).
 """
@@ -45,6 +45,11 @@ def _compress(a):
     from uav_tilt_vision.compress import compress
     return compress(a.model, a.data, a.out_dir, a.ratio, a.finetune_epochs, a.seed,
                     a.calib_images, a.eval_data, crop=a.crop)
+
+
+def _quantize(a):
+    from uav_tilt_vision.compress import quantize
+    return quantize(a.model, a.data, a.calib_images, a.eval_data)
 
 
 def _profile(a):
@@ -100,6 +105,12 @@ def parser():
     c.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
                    help='fine-tune on object-centred W x H windows')
     c.set_defaults(run=_compress)
+    q = sub.add_parser('quantize', help='int8 ONNX of a pruned model only (compress step 3)')
+    q.add_argument('--model', default=f'{MODELS}/detector_pruned.pt')
+    q.add_argument('--data', required=True, help='training set (calibration)')
+    q.add_argument('--calib-images', type=int, default=128)
+    q.add_argument('--eval-data', help='held-out set to evaluate the int8 model on')
+    q.set_defaults(run=_quantize)
     p = sub.add_parser('profile', help='params and MACs per layer type vs YOLOv3-tiny')
     p.add_argument('--model', nargs='*', default=[f'{MODELS}/detector_fp32.pt',
                                                   f'{MODELS}/detector_pruned.pt'],
