@@ -18,3 +18,17 @@ def probe():
     probe = Probe()
     yield probe
     probe.close()
+
+
+@pytest.fixture
+def half_rounded():
+    """Rounds a model's float weights in place to what ``save_model`` stores (float16)."""
+    import torch
+
+    def round_weights(model):
+        with torch.no_grad():
+            for tensor in model.state_dict().values():
+                if tensor.is_floating_point():
+                    tensor.copy_(tensor.half())
+        return model
+    return round_weights

@@ -55,7 +55,7 @@ def test_wrong_channel_list_or_scales_are_rejected():
 
 
 @pytest.mark.parametrize('scales', [2, 3])
-def test_save_load_round_trip_with_irregular_channels(tmp_path, scales):
+def test_save_load_round_trip_with_irregular_channels(tmp_path, scales, half_rounded):
     torch.manual_seed(0)
     channels = [5, 11, 13, 29, 37, 45, 70, 21, 33, 9, 27, 12, 14][:7 + 2 * scales]
     anchors = [[[40, 30], [60, 70], [100, 90]], [[8, 9], [15, 20], [25, 27]],
@@ -69,6 +69,9 @@ def test_save_load_round_trip_with_irregular_channels(tmp_path, scales):
     save_model(path, model, {'note': 'pruned'})
     loaded = load_model(path)
     assert loaded.channels() == channels and loaded.meta == {'note': 'pruned'}
+    assert all(v.dtype == torch.float32 for v in loaded.state_dict().values()
+               if v.is_floating_point())
+    half_rounded(model)     # the weights are stored in half precision
     x = torch.rand(2, 3, 256, 320)
     with torch.no_grad():
         for a, b in zip(model(x), loaded(x)):
