@@ -45,7 +45,8 @@ def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
         bad.pose.orientation.w = 1.0
         pub.publish(bad)
         logs = (tmp_path / 'plant.log', tmp_path / 'controller.log')
-        done = probe.spin_until(lambda: 'IDLE' in modes[1:], 170.0)
+        # IDLE may show before the autostart takes effect: the end is IDLE after TAKEOFF.
+        done = probe.spin_until(lambda: 'TAKEOFF' in modes and modes[-1] == 'IDLE', 170.0)
         assert done, (modes, [p.read_text()[-2000:] for p in logs])
     finally:
         code_c, _ = stop(controller)
