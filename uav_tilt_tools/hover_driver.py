@@ -44,21 +44,21 @@ class HoverDriver(Node):
         self.complete_sets = 0      # ticks whose odom and wrench had arrived before the imu
         self.wall_first = None
         self.wall_last = None
-        self.z_ref_m = self.z_m = self.vz_m_s = None
+        self.z_ref_m = None         # the height held: the first odom's
 
     def _remember(self, topic):
         def callback(msg):
-            self.latest[topic] = ros_msgs.stamp_ns(msg.header.stamp)
-            if topic == names.ODOM:
-                self.z_m, self.vz_m_s = msg.pose.pose.position.z, msg.twist.twist.linear.z
-                self.z_ref_m = self.z_m if self.z_ref_m is None else self.z_ref_m
+            self.latest[topic] = msg
         return callback
 
     def thrust_per_rotor_n(self):
         """Hover thrust scaled by a vertical PD on the odom height (none before odom)."""
-        if self.z_ref_m is None:
+        odom = self.latest.get(names.ODOM)
+        if odom is None:
             return self.thrust_n
-        accel = KP_Z * (self.z_ref_m - self.z_m) - KD_Z * self.vz_m_s
+        z_m = odom.pose.pose.position.z
+        self.z_ref_m = z_m if self.z_ref_m is None else self.z_ref_m
+        accel = KP_Z * (self.z_ref_m - z_m) - KD_Z * odom.twist.twist.linear.z
         return self.thrust_n * (1.0 + float(np.clip(accel / GRAVITY, -0.5, 0.5)))
 
     def on_imu(self, msg):
@@ -68,7 +68,8 @@ class HoverDriver(Node):
         stamp = ros_msgs.stamp_ns(msg.header.stamp)
         if self.answered and stamp == self.answered[-1]:
             return      # the plant re-sent a tick it is still waiting on
-        if all(self.latest.get(t) == stamp for t in self.latest_topics):
+        if all(t in self.latest and ros_msgs.stamp_ns(self.latest[t].header.stamp) == stamp
+               for t in self.latest_topics):
             self.complete_sets += 1
         self.answered.append(stamp)
         now = time.monotonic()
