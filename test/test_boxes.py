@@ -98,17 +98,30 @@ def logit(p):
 def test_decode_hand_case():
     a, c, h, w, stride = 2, 1, 2, 3, 8
     anchors = [[10.0, 20.0], [4.0, 4.0]]
-    head = torch.zeros(1, a * (5 + c), h, w)
+    head = np.zeros((a * (5 + c), h, w), np.float32)
     # anchor 1, row 1, col 2: sig(tx) = 0.75 -> offset 2*0.75 - 0.5 = 1.0 cell;
     # sig(tw) = 0.25 -> w = (2*0.25)^2 * 4 = 1; sig(th) = 0.75 -> h = 1.5^2 * 4 = 9
-    head[0, 6 + 0, 1, 2] = logit(0.75)
-    head[0, 6 + 2, 1, 2] = logit(0.25)
-    head[0, 6 + 3, 1, 2] = logit(0.75)
-    head[0, 6 + 4, 1, 2] = logit(0.9)
+    head[6 + 0, 1, 2] = logit(0.75)
+    head[6 + 2, 1, 2] = logit(0.25)
+    head[6 + 3, 1, 2] = logit(0.75)
+    head[6 + 4, 1, 2] = logit(0.9)
     out = decode(head, anchors, stride)
-    assert out.shape == (1, a * h * w, 5 + c)
+    assert out.shape == (a * h * w, 5 + c)
     # all-zero logits: centre = (cell + 0.5) * stride, size = anchor; anchor 0, row 1, col 2
-    np.testing.assert_allclose(out[0, 1 * w + 2].numpy(), [15, 2, 25, 22, 0.5, 0.5], atol=1e-5)
+    np.testing.assert_allclose(out[1 * w + 2], [15, 2, 25, 22, 0.5, 0.5], atol=1e-5)
     cx, cy = (2 + 1.0) * 8, (1 + 0.5) * 8
-    np.testing.assert_allclose(out[0, h * w + 1 * w + 2].numpy(),
-                               [cx - 0.5, cy - 4.5, cx + 0.5, cy + 4.5, 0.9, 0.5], atol=1e-5)
+    expected = [cx - 0.5, cy - 4.5, cx + 0.5, cy + 4.5, 0.9, 0.5]
+    np.testing.assert_allclose(out[h * w + 1 * w + 2], expected, atol=1e-5)
+    # an objectness threshold keeps exactly the cells above it (here the one at 0.9)
+    np.testing.assert_allclose(decode(head, anchors, stride, min_obj=0.6), [expected],
+                               atol=1e-5)
+
+
+def test_decode_threshold_keeps_the_rows_above_it_in_order():
+    rng = np.random.default_rng(3)
+    anchors = [[10.0, 20.0], [4.0, 4.0], [30.0, 25.0]]
+    head = rng.normal(0, 3, (3 * 8, 5, 7)).astype(np.float32)
+    full = decode(head, anchors, 16)
+    for min_obj in (0.1, 0.5, 0.95):
+        np.testing.assert_array_equal(decode(head, anchors, 16, min_obj),
+                                      full[full[:, 4] > min_obj])

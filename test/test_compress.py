@@ -78,10 +78,15 @@ def test_onnx_export_matches_torch_and_int8_stays_close(tmp_path, images_dir, sc
     assert ops.count('QuantizeLinear') > 10 and ops.count('DequantizeLinear') > 10
     # per-channel weights: the weight scales are vectors (one per output channel)
     inits = {i.name: i for i in graph.graph.initializer}
-    scales = [inits[n.input[1]] for n in graph.graph.node
-              if n.op_type == 'DequantizeLinear' and n.input[1] in inits
-              and n.input[0] in inits and inits[n.input[0]].data_type == onnx.TensorProto.INT8]
-    assert scales and all(len(s.dims) == 1 and s.dims[0] > 1 for s in scales)
+    w_scales = [inits[n.input[1]] for n in graph.graph.node
+                if n.op_type == 'DequantizeLinear' and n.input[1] in inits
+                and n.input[0] in inits and inits[n.input[0]].data_type == onnx.TensorProto.INT8]
+    assert w_scales and all(len(s.dims) == 1 and s.dims[0] > 1 for s in w_scales)
+    # int8 weights for every conv but the heads and the two stem convs (stride 1 and 2)
+    stem = compress.float_stem(onnx.load(str(fp32)))
+    assert [n.split('/')[1] for n in stem] == ['backbone.0'] * 2 + ['pool'] + \
+        ['backbone.1'] * 2 + ['pool_1']
+    assert len(w_scales) == len(model.channels()) - 2
     q = ort.InferenceSession(str(int8), providers=['CPUExecutionProvider']).run(
         None, {'images': x})
     for a, b in zip(q, ref):

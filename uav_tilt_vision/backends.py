@@ -11,10 +11,8 @@ import json
 from pathlib import Path
 
 import numpy as np
-import torch
 
-from uav_tilt_vision.detector import (STRIDES, decode_heads, input_batch, load_model,
-                                      postprocess)
+from uav_tilt_vision.detector import detections, input_batch, load_model
 
 BACKENDS = ('torch', 'onnxruntime')
 
@@ -53,7 +51,7 @@ class OnnxDetector:
         self.session = ort.InferenceSession(str(model_path), opts,
                                             providers=['CPUExecutionProvider'])
         meta = json.loads(self.session.get_modelmeta().custom_metadata_map['detector'])
-        self.anchors = torch.tensor(meta['anchors'], dtype=torch.float32)
+        self.anchors = np.asarray(meta['anchors'], dtype=np.float32)
         self.img_size = tuple(meta['img_size'])
         self.num_classes = meta['num_classes']
         self.model_path, self.note = str(model_path), ''
@@ -64,10 +62,7 @@ class OnnxDetector:
         images, single = _as_list(images)
         x, frames = input_batch(images, self.img_size)
         heads = self.session.run(None, {self.input_name: x})
-        dets = decode_heads([torch.from_numpy(h) for h in heads], self.anchors,
-                            STRIDES).numpy()
-        out = [postprocess(d, conf_thres, iou_thres, 100, s, p, img.shape)
-               for d, (s, p), img in zip(dets, frames, images)]
+        out = detections(heads, self.anchors, frames, images, conf_thres, iou_thres)
         return out[0] if single else out
 
 

@@ -102,18 +102,25 @@ def nms(boxes, scores, iou_thres, classes=None):
     return order[~suppressed]
 
 
-def decode(head, anchors, stride):
-    """Decode one raw head map into boxes in input pixels.
+def decode(head, anchors, stride, min_obj=0.0):
+    """Decode one image's raw head map into boxes in input pixels (numpy).
 
-    ``head``: (B, A*(5+C), H, W) logits; ``anchors``: (A, 2) anchor sizes in input
-    pixels. Uses the bounded YOLOv4/v5 parametrisation (see ``yolo_loss``):
+    ``head``: (A*(5+C), H, W) logits; ``anchors``: (A, 2) anchor sizes in input pixels.
+    Uses the bounded YOLOv4/v5 parametrisation (see ``yolo_loss``):
     ``xy = (2*sig(t_xy) - 0.5 + cell) * stride``, ``wh = (2*sig(t_wh))**2 * anchor``.
-    Returns (B, A*H*W, 5+C): xyxy, objectness probability, class probabilities.
+    Only cells whose objectness probability exceeds ``min_obj`` are decoded: a detection's
+    score (objectness times class probability) cannot exceed its objectness, so a score
+    threshold may be passed here and the few candidate cells are all that is computed.
+    Returns (K, 5+C) in (anchor, row, column) order: xyxy, objectness, class probabilities.
     """
-    p = head_view(head, len(anchors)).sigmoid()
-    xy, wh = grid_xywh(p, anchors, stride)
-    out = torch.cat([xywh_to_xyxy(torch.cat([xy, wh], -1)), p[..., 4:]], -1)
-    return out.reshape(out.shape[0], -1, out.shape[-1])
+    anchors = np.asarray(anchors, dtype=np.float32).reshape(-1, 2)
+    t = head.reshape(len(anchors), -1, *head.shape[1:])
+    with np.errstate(divide='ignore'):
+        min_logit = np.log(min_obj) - np.log1p(-min_obj)
+    a, y, x = np.nonzero(t[:, 4] > min_logit)
+    p = 1.0 / (1.0 + np.exp(-t[a, :, y, x].astype(np.float32)))
+    xy, wh = cell_xywh(p, np.stack([x, y], -1), anchors[a], stride)
+    return np.concatenate([xywh_to_xyxy(np.concatenate([xy, wh], -1)), p[:, 4:]], -1)
 
 
 def head_view(head, num_anchors):
@@ -122,16 +129,7 @@ def head_view(head, num_anchors):
     return head.view(b, num_anchors, ch // num_anchors, h, w).permute(0, 1, 3, 4, 2)
 
 
-def grid_xywh(p, anchors, stride):
-    """Box centres and sizes (input pixels) from sigmoid outputs ``p`` of shape (B, A, H, W, K)."""
-    h, w = p.shape[2:4]
-    gy, gx = torch.meshgrid(torch.arange(h, device=p.device, dtype=p.dtype),
-                            torch.arange(w, device=p.device, dtype=p.dtype), indexing='ij')
-    grid = torch.stack([gx, gy], -1)
-    anchors = torch.as_tensor(anchors, device=p.device, dtype=p.dtype).view(1, -1, 1, 1, 2)
-    return cell_xywh(p, grid, anchors, stride)
-
-
 def cell_xywh(p, cell, anchors, stride):
-    """The decode formula: centre and size (input pixels) from sigmoid outputs, cells, anchors."""
+    """The decode formula: centre and size (input pixels) from sigmoid outputs, cells, anchors
+    (numpy or torch)."""
     return (p[..., :2] * 2 - 0.5 + cell) * stride, (p[..., 2:4] * 2) ** 2 * anchors

@@ -10,7 +10,10 @@
    training images. BatchNorm is folded into the convs by the exporter. The graph outputs
    the raw heads; the three head convs stay float (they hold box offsets, sizes and logits
    of very different ranges, which one int8 scale per tensor cannot; they are 1x1 convs, a
-   few percent of the MACs), and decoding and NMS run outside the graph (``backends``).
+   few percent of the MACs), and so does the stem at full and half input resolution (the
+   first two conv blocks and their pools: with 3-12 channels per pixel ONNX Runtime's int8
+   convolutions run slower than its float ones there, see ``bench vision``). Decoding and
+   NMS run outside the graph (``backends``).
 """
 
 import json
@@ -27,8 +30,10 @@ from uav_tilt_vision.yolo_data import YoloDataset
 ONNX_OPSET = 17
 HEAD_OUTPUTS = ('head0', 'head1', 'head2')
 CALIB_PERCENTILE = 99.999
+FLOAT_STEM_POOLS = 2   # the float stem ends with the second maxpool (stride 4)
 QUANTIZATION = ('onnxruntime static QDQ, per-channel int8 weights, uint8 activations, '
-                f'{CALIB_PERCENTILE} percentile calibration, head convs float')
+                f'{CALIB_PERCENTILE} percentile calibration, head convs and the stride 1-2 '
+                'stem float')
 
 
 def prune(model, ratio, round_to=8):
@@ -93,10 +98,22 @@ def quantize_int8(fp32_path, out_path, data_dir, n_calib, img_size):
     heads = [n.name for n in proto.graph.node if set(n.output) & set(HEAD_OUTPUTS)]
     quantize_static(str(fp32_path), str(out_path), Reader(), quant_format=QuantFormat.QDQ,
                     per_channel=True, activation_type=QuantType.QUInt8,
-                    weight_type=QuantType.QInt8, nodes_to_exclude=heads,
+                    weight_type=QuantType.QInt8, nodes_to_exclude=heads + float_stem(proto),
                     calibrate_method=CalibrationMethod.Percentile,
                     extra_options={'CalibPercentile': CALIB_PERCENTILE})
     set_metadata(out_path, json.loads(meta['detector']))
+
+
+def float_stem(proto, pools=FLOAT_STEM_POOLS):
+    """Names of the conv, activation and pool nodes up to the ``pools``-th maxpool."""
+    names = []
+    for node in proto.graph.node:   # the exporter writes nodes in execution order
+        if node.op_type in ('Conv', 'LeakyRelu', 'MaxPool'):
+            names.append(node.name)
+            pools -= node.op_type == 'MaxPool'
+            if pools == 0:
+                break
+    return names
 
 
 def size_stats(model):

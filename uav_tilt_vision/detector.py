@@ -140,10 +140,6 @@ class Detector(nn.Module):
             out.append(self.head2(y))
         return out
 
-    def decode(self, heads):
-        """(B, N, 5+C) boxes xyxy in input pixels + objectness + class probabilities."""
-        return decode_heads(heads, self.anchors, self.strides)
-
     @torch.no_grad()
     def predict(self, images, conf_thres=0.25, iou_thres=0.45, max_det=100):
         """Detect in uint8 RGB images (H, W, 3), a list or one image.
@@ -156,10 +152,11 @@ class Detector(nn.Module):
         x, frames = input_batch(images, self.img_size)
         was_training = self.training
         self.eval()
-        dets = self.decode(self(torch.from_numpy(x).to(self.anchors.device))).float()
+        heads = [h.float().cpu().numpy()
+                 for h in self(torch.from_numpy(x).to(self.anchors.device))]
         self.train(was_training)
-        return [postprocess(d, conf_thres, iou_thres, max_det, s, p, img.shape)
-                for d, (s, p), img in zip(dets.cpu().numpy(), frames, images)]
+        return detections(heads, self.anchors.cpu().numpy(), frames, images, conf_thres,
+                          iou_thres, max_det)
 
 
 def input_batch(images, img_size):
@@ -170,9 +167,17 @@ def input_batch(images, img_size):
     return x, [(s, p) for _, s, p in boxes]
 
 
-def decode_heads(heads, anchors, strides):
-    """All heads decoded and concatenated: (B, N, 5+C), see ``boxes.decode``."""
-    return torch.cat([decode(h, a, s) for h, a, s in zip(heads, anchors, strides)], 1)
+def detections(heads, anchors, frames, images, conf_thres, iou_thres, max_det=100):
+    """One (N, 6) detection array per image from the raw heads (numpy, coarsest first).
+
+    ``anchors``: (scales, A, 2); ``frames``: each image's (scale, pad) from ``input_batch``.
+    """
+    out = []
+    for b, ((scale, pad), img) in enumerate(zip(frames, images)):
+        det = np.concatenate([decode(h[b], a, s, conf_thres)
+                              for h, a, s in zip(heads, anchors, STRIDES)])
+        out.append(postprocess(det, conf_thres, iou_thres, max_det, scale, pad, img.shape))
+    return out
 
 
 def postprocess(det, conf_thres, iou_thres, max_det, scale, pad, orig_shape):
