@@ -147,3 +147,21 @@ def test_overfit_four_images(tmp_path):
     assert min(hist[-5:]) < hist[0] / 5
     # ... and the memorised boxes must be found again on the training images
     assert evaluate(load_model(tmp_path / 'o.pt'), data)['map50'] > 0.5
+
+
+def test_cli_continued_run_keeps_its_lineage(data8, tmp_path):
+    from uav_tilt_vision import vision_cli
+    model = tmp_path / 'pruned.pt'
+    train(data8, model, epochs=1, seed=0, batch=4, width_mult=0.125, device='cpu',
+          log=lambda s: None)
+    first = json.loads(card_path(model).read_text())
+    first.update(source='models/fp32.pt', pruning_ratio=0.25)
+    card_path(model).write_text(json.dumps(first))
+    # continue in place, as the README's last fine-tune of the pruned model does
+    args = ['train', '--data', str(data8), '--init', str(model), '--out', str(model),
+            '--epochs', '1', '--seed', '1', '--batch', '4', '--device', 'cpu']
+    assert vision_cli.main(args) == 0
+    card = json.loads(card_path(model).read_text())
+    assert card['init']['seed'] == 0 and card['seed'] == 1 and card['total_epochs'] == 2
+    assert (card['source'], card['pruning_ratio']) == ('models/fp32.pt', 0.25)
+    assert load_model(model).meta['total_epochs'] == 2

@@ -1,10 +1,11 @@
 """`uav-tilt bench vision`: detector and pipeline speed on CPU (DESIGN section 7).
 
 reference_ms_p50: fp32 YOLOv3-tiny (reference widths, untrained: only speed matters) at
-the same 320x256 input; detector_ms_p50: the deployed model on its backend; speedup:
-their ratio in the same run; pipeline_fps / pipeline_ms_p95: the whole
-VisionPipeline.process on frames rendered by the plant while the vehicle drifts past the
-target. Torch and ONNX Runtime get 2 threads each (the Jetson-class budget).
+the same 320x256 input; detector_ms_p50: the deployed model on its backend, the two
+timed in turns on the same frames; speedup: their ratio; pipeline_fps /
+pipeline_ms_p95: the whole VisionPipeline.process on frames rendered by the plant while
+the vehicle drifts past the target. Torch and ONNX Runtime get 2 threads each (the
+Jetson-class budget).
 """
 import time
 
@@ -24,6 +25,7 @@ from uav_tilt_vision.vision_node import VisionNodeConfig, open_detector
 THREADS = 2
 N_FRAMES = 60           # two seconds of camera frames
 WARMUP = 3
+ROUNDS = 5
 
 
 def rendered_frames(n=N_FRAMES):
@@ -49,18 +51,24 @@ def rendered_frames(n=N_FRAMES):
         plant.close()
 
 
-def time_ms(fn, inputs, seconds):
-    """Milliseconds per call of ``fn`` over ``inputs`` (cycled) for about ``seconds``."""
-    for x in inputs[:WARMUP]:
-        fn(x)
-    out, start, k = [], time.perf_counter(), 0
-    while not out or (time.perf_counter() - start < seconds and len(out) < 10 * len(inputs)):
-        x = inputs[k % len(inputs)]
-        t0 = time.perf_counter()
-        fn(x)
-        out.append((time.perf_counter() - t0) * 1e3)
-        k += 1
-    return np.array(out)
+def time_ms(fns, inputs, seconds, rounds=ROUNDS):
+    """Milliseconds per call of each of ``fns`` (one array each) over ``inputs`` (cycled),
+    about ``seconds`` in all. The functions take turns in ``rounds`` blocks, so that a
+    change of load on a shared machine reaches all of them and their ratio holds; each
+    block starts with untimed warm-up calls (the thread pools of torch and ONNX Runtime
+    spin for a while after a call and would slow the other down)."""
+    out, k = [[] for _ in fns], 0
+    for _ in range(rounds):
+        for fn, times in zip(fns, out):
+            for x in inputs[:WARMUP]:
+                fn(x)
+            start = time.perf_counter()
+            while time.perf_counter() - start < seconds / (rounds * len(fns)):
+                t0 = time.perf_counter()
+                fn(inputs[k % len(inputs)])
+                times.append((time.perf_counter() - t0) * 1e3)
+                k += 1
+    return [np.array(times) for times in out]
 
 
 def bench_vision(seconds=10.0, model_path=None, backend=None):
@@ -72,20 +80,20 @@ def bench_vision(seconds=10.0, model_path=None, backend=None):
         detector = OnnxDetector(detector.model_path, threads=THREADS)
     K, frames = rendered_frames()
     images = [rgb for rgb, _, _ in frames]
-    share = seconds / 3.0
     reference = Detector(num_classes=len(OBJECT_CLASSES)).eval()
-    ref_ms = time_ms(lambda img: reference.predict(img), images, share)
+    fns = [reference.predict] + ([detector.predict] if detector is not None else [])
+    ref_ms, *det = time_ms(fns, images, seconds / 2.0)
     result = {'reference_ms_p50': float(np.median(ref_ms)), 'detector_ms_p50': None,
               'speedup': None, 'backend': 'none', 'model': None, 'note': note}
-    if detector is not None:
-        det_ms = time_ms(detector.predict, images, share)
+    if det:
+        det_ms = det[0]
         result.update(detector_ms_p50=float(np.median(det_ms)),
                       speedup=float(np.median(ref_ms) / np.median(det_ms)),
                       backend=detector.backend, model=detector.model_path)
     # Each pass restarts the detect/track schedule on the same sequence.
     pipe_ms = []
     start = time.perf_counter()
-    while not pipe_ms or time.perf_counter() - start < share:
+    while not pipe_ms or time.perf_counter() - start < seconds / 2.0:
         pipeline = VisionPipeline(detector, K, cfg)
         for rgb, depth, t_s in frames:
             t0 = time.perf_counter()
