@@ -137,6 +137,16 @@ def test_training_is_reproducible(data8, tmp_path):
     assert a['loss_history'] == b['loss_history']
 
 
+def test_training_keeps_the_anchors(data8, tmp_path):
+    anchors = [[[40.0, 40.0], [60.0, 50.0], [70.0, 70.0]],
+               [[10.0, 12.0], [20.0, 20.0], [30.0, 28.0]]]
+    card = train(data8, tmp_path / 'a.pt', epochs=2, seed=0, batch=4, device='cpu',
+                 anchors=anchors, log=lambda s: None)
+    # exactly: they are constants of the model, not weights
+    assert card['anchors'] == anchors
+    assert load_model(tmp_path / 'a.pt').anchors.tolist() == anchors
+
+
 def test_overfit_four_images(tmp_path):
     data = make_dataset(tmp_path / 'data4', 4, seed=7)
     card = train(data, tmp_path / 'o.pt', epochs=40, seed=0, batch=4, device='cpu', lr=1e-2,

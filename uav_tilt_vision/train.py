@@ -125,6 +125,8 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
         history.append(total / len(loader))
         log(f'epoch {epoch + 1}/{epochs} loss {history[-1]:.4f} '
             + ' '.join(f'{k} {v / len(loader):.4f}' for k, v in parts.items()))
+    # the anchors are a constant buffer: float rounding in the average would drift them
+    ema.module.anchors.copy_(model.anchors)
     model.load_state_dict(ema.module.state_dict())
     model = model.to(memory_format=torch.contiguous_format).eval()
     card = {'data_dir': str(data_dir), 'data_seed': meta.get('seed'),
