@@ -45,7 +45,7 @@ def fp32_map(heldout):
 
 
 # The spec's goal is mAP@0.5 >= 0.95 on held-out scenes; the committed model measures
-# 0.935 on this draw, 0.940 on 2,000 fresh held-out images (README, Detector). The floor
+# 0.940 on this draw, 0.949 on 2,000 fresh held-out images (README, Detector). The floor
 # guards against regressions; the goal stays visible as an expected failure until a model
 # reaches it.
 MAP50_FLOOR, MAP50_GOAL = 0.90, 0.95
@@ -56,8 +56,8 @@ def test_fp32_map50_on_heldout_keeps_its_floor(fp32_map):
     assert fp32_map['map50'] >= MAP50_FLOOR
 
 
-@pytest.mark.xfail(reason='the committed detector measures 0.935 mAP@0.5 on this held-out '
-                          'draw (0.940 on 2,000 images), short of the 0.95 goal', strict=False)
+@pytest.mark.xfail(reason='the committed detector measures 0.940 mAP@0.5 on this held-out '
+                          'draw (0.949 on 2,000 images), short of the 0.95 goal', strict=False)
 def test_fp32_map50_on_heldout_reaches_the_goal(fp32_map):
     assert fp32_map['map50'] >= MAP50_GOAL
 
