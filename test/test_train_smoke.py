@@ -10,7 +10,7 @@ import torch
 from uav_tilt_vision.detector import load_model
 from uav_tilt_vision.train import card_path, evaluate, train
 from uav_tilt_vision.yolo_data import YoloDataset, collate, kmeans_anchors, read_labels
-from uav_tilt_vision.yolo_loss import assign, ciou
+from uav_tilt_vision.yolo_loss import assign, ciou, distill_loss
 
 torch.set_num_threads(2)
 
@@ -175,3 +175,72 @@ def test_cli_continued_run_keeps_its_lineage(data8, tmp_path):
     assert card['init']['seed'] == 0 and card['seed'] == 1 and card['total_epochs'] == 2
     assert (card['source'], card['pruning_ratio']) == ('models/fp32.pt', 0.25)
     assert load_model(model).meta['total_epochs'] == 2
+
+
+def fake_heads(obj_logit_bg=-20.0, num_classes=3, seed=0):
+    """Teacher-like raw heads of one 3-anchor scale: every cell background but one object."""
+    torch.manual_seed(seed)
+    head = torch.randn(1, 3 * (5 + num_classes), 4, 5)
+    view = head.view(1, 3, 5 + num_classes, 4, 5)
+    view[:, :, 4] = obj_logit_bg
+    view[0, 1, 4, 2, 3] = 5.0            # anchor 1, cell (y 2, x 3) holds an object
+    return head
+
+
+def test_distill_loss_vanishes_at_the_teacher_and_weighs_by_objectness():
+    teacher = fake_heads()
+    student = teacher.clone().requires_grad_(True)
+    loss, _ = distill_loss([student], [teacher], 3)
+    loss.backward()
+    assert abs(float(loss.detach())) < 1e-6 and float(student.grad.abs().max()) < 1e-6
+    # one box logit moved from the teacher's value to +-2 around 0: KL(0.5 || sigmoid(2))
+    kl = 0.5 * np.log(0.5 / (1 / (1 + np.exp(-2)))) + 0.5 * np.log(0.5 / (1 / (1 + np.exp(2))))
+    for cell, expect in (((0, 1, 0, 2, 3), kl), ((0, 2, 0, 1, 1), 0.0)):   # object, background
+        t, s = teacher.clone(), teacher.clone()
+        t.view(1, 3, 8, 4, 5)[cell] = 0.0
+        s.view(1, 3, 8, 4, 5)[cell] = 2.0
+        _, parts = distill_loss([s], [t], 3)
+        # the object cell's weight is sigmoid(5) = 0.993 of the whole
+        assert parts['d_box'] == pytest.approx(expect, abs=0.01 * kl)
+        assert parts['d_obj'] == parts['d_cls'] == 0.0
+
+
+def test_distillation_pulls_the_student_towards_its_teacher(data8, tmp_path):
+    anchors = [[[40.0, 40.0], [60.0, 50.0], [70.0, 70.0]],
+               [[10.0, 12.0], [20.0, 20.0], [30.0, 28.0]]]
+    kw = dict(epochs=8, batch=4, device='cpu', anchors=anchors, width_mult=0.125, lr=1e-2,
+              ema_decay=0, augment=False, log=lambda s: None)
+    train(data8, tmp_path / 't.pt', seed=0, **kw)
+    teacher = load_model(tmp_path / 't.pt')
+    train(data8, tmp_path / 'plain.pt', seed=1, **kw)
+    card = train(data8, tmp_path / 'kd.pt', seed=1, teacher=teacher, distill_gain=5.0, **kw)
+    assert card['distill_gain'] == 5.0
+    x = torch.stack([YoloDataset(data8)[i][0] for i in range(8)])
+    with torch.no_grad():
+        ht = teacher(x)
+        gap = {name: float(distill_loss(load_model(tmp_path / name)(x), ht, 3)[0])
+               for name in ('plain.pt', 'kd.pt')}
+    assert gap['kd.pt'] < 0.5 * gap['plain.pt']
+
+
+def test_teacher_must_match_the_student(data8, tmp_path):
+    from uav_tilt_vision.detector import Detector
+    with pytest.raises(ValueError, match='teacher'):
+        train(data8, tmp_path / 'x.pt', epochs=1, batch=4, device='cpu', width_mult=0.125,
+              teacher=Detector(5, 0.125), log=lambda s: None)
+
+
+def test_compress_cli_fine_tunes_from_the_unpruned_teacher(data8, tmp_path, capsys):
+    from uav_tilt_vision import vision_cli
+    fp32 = tmp_path / 'fp32.pt'
+    train(data8, fp32, epochs=1, seed=0, batch=4, width_mult=0.25, scales=3, device='cpu',
+          log=lambda s: None)
+    args = ['compress', '--model', str(fp32), '--data', str(data8), '--out-dir', str(tmp_path),
+            '--ratio', '0.25', '--finetune-epochs', '1', '--calib-images', '4']
+    capsys.readouterr()
+    assert vision_cli.main(args) == 0
+    # stdout is one JSON report (the calibrator's progress goes to stderr)
+    assert set(json.loads(capsys.readouterr().out)) == {'fp32', 'pruned', 'int8'}
+    card = json.loads(card_path(tmp_path / 'detector_pruned.pt').read_text())
+    assert card['teacher'] == str(fp32) and card['distill_gain'] == 1.0
+    assert card['pruning_ratio'] == 0.25 and (tmp_path / 'detector_int8.onnx').exists()

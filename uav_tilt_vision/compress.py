@@ -4,7 +4,8 @@
    magnitude (the dependency graph keeps the c4 -> c10 route and BN consistent); the
    heads keep their outputs. The result is still a ``Detector`` with irregular channel
    counts, saved with ``save_model``.
-2. Fine-tuning with ``train.train(model=...)`` recovers the accuracy.
+2. Fine-tuning with ``train.train(model=...)`` recovers the accuracy, distilled from the
+   unpruned model (``train.train(teacher=...)``) unless ``distill_gain`` is 0.
 3. ``export_onnx`` + ``quantize_int8``: ONNX Runtime static quantization, QDQ format,
    per-channel int8 weights, uint8 activations calibrated (99.999th percentile) on
    training images. BatchNorm is folded into the convs by the exporter. The graph outputs
@@ -16,7 +17,9 @@
    NMS run outside the graph (``backends``).
 """
 
+import contextlib
 import json
+import sys
 import tempfile
 from pathlib import Path
 
@@ -96,11 +99,13 @@ def quantize_int8(fp32_path, out_path, data_dir, n_calib, img_size):
     proto = onnx.load(str(fp32_path))
     meta = {p.key: p.value for p in proto.metadata_props}
     heads = [n.name for n in proto.graph.node if set(n.output) & set(HEAD_OUTPUTS)]
-    quantize_static(str(fp32_path), str(out_path), Reader(), quant_format=QuantFormat.QDQ,
-                    per_channel=True, activation_type=QuantType.QUInt8,
-                    weight_type=QuantType.QInt8, nodes_to_exclude=heads + float_stem(proto),
-                    calibrate_method=CalibrationMethod.Percentile,
-                    extra_options={'CalibPercentile': CALIB_PERCENTILE})
+    # the calibrator prints its progress: keep stdout for the CLI's JSON
+    with contextlib.redirect_stdout(sys.stderr):
+        quantize_static(str(fp32_path), str(out_path), Reader(), quant_format=QuantFormat.QDQ,
+                        per_channel=True, activation_type=QuantType.QUInt8,
+                        weight_type=QuantType.QInt8, nodes_to_exclude=heads + float_stem(proto),
+                        calibrate_method=CalibrationMethod.Percentile,
+                        extra_options={'CalibPercentile': CALIB_PERCENTILE})
     set_metadata(out_path, json.loads(meta['detector']))
 
 
@@ -123,11 +128,14 @@ def size_stats(model):
 
 
 def compress(model_path, data_dir, out_dir, ratio=0.5, finetune_epochs=4, seed=0,
-             calib_images=128, eval_dir=None, lr=1e-3, crop=None):
+             calib_images=128, eval_dir=None, lr=1e-3, crop=None, distill_gain=1.0,
+             log=print):
     """fp32 ``.pt`` -> ``detector_pruned.pt`` (+ card) and ``detector_int8.onnx`` (+ card).
 
     Returns a report with params, MACs and (with ``eval_dir``) mAP of every stage.
     ``crop``: fine-tune on object-centred windows (see ``train.train``).
+    ``distill_gain``: weight of the distillation from the unpruned model (0: labels only).
+    ``log``: receives the fine-tuning's per-epoch lines.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -137,9 +145,12 @@ def compress(model_path, data_dir, out_dir, ratio=0.5, finetune_epochs=4, seed=0
         report['fp32'].update(evaluate(model, eval_dir))
     pruned_path = out / 'detector_pruned.pt'
     pruned = prune(model, ratio)
+    teacher = load_model(model_path) if distill_gain else None
     card = train(data_dir, pruned_path, finetune_epochs, seed, lr=lr, model=pruned,
-                 eval_dir=eval_dir, device='cpu', crop=crop)
-    card.update(source=str(model_path), pruning_ratio=ratio)
+                 eval_dir=eval_dir, device='cpu', crop=crop, teacher=teacher,
+                 distill_gain=distill_gain, log=log)
+    card.update(source=str(model_path), pruning_ratio=ratio,
+                teacher=str(model_path) if teacher else None)
     save_model(pruned_path, pruned, card)
     card_path(pruned_path).write_text(json.dumps(card, indent=2))
     report['pruned'] = {**size_stats(pruned), 'path': str(pruned_path),

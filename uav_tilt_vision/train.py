@@ -17,7 +17,7 @@ from uav_tilt_vision.detector import DEFAULT_ANCHORS, IMG_SIZE, Detector, save_m
 from uav_tilt_vision.metrics import mean_ap
 from uav_tilt_vision.yolo_data import (HSV_GAINS, YoloDataset, collate, kmeans_anchors,
                                        read_meta)
-from uav_tilt_vision.yolo_loss import YoloLoss
+from uav_tilt_vision.yolo_loss import YoloLoss, distill_loss
 
 
 def progress(iterable, **kwargs):
@@ -62,7 +62,7 @@ def num_classes_of(dataset, meta):
 def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_SIZE, batch=16,
           device='auto', lr=3e-3, weight_decay=5e-4, augment=True, hflip=False, anchors=None,
           eval_dir=None, workers=0, log=print, model=None, crop=None, ema_decay=0.999,
-          scales=2, hsv=HSV_GAINS):
+          scales=2, hsv=HSV_GAINS, teacher=None, distill_gain=1.0):
     """Train a ``Detector`` and write weights (``save_model``) plus a model card JSON beside them.
 
     ``anchors`` None = k-means on the training labels (defaults when too few boxes).
@@ -74,6 +74,9 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     ``eval_dir``: optional YOLO-format set evaluated at the end (metrics go in the card).
     ``ema_decay``: the weights written (and left in ``model``) are an exponential moving
     average of the trained ones (``ema_average``); 0 keeps the last step's weights.
+    ``teacher``: a ``Detector`` with the same heads and anchors (e.g. the unpruned model a
+    pruned ``model`` came from) whose outputs the model also learns to match, with
+    ``yolo_loss.distill_loss`` weighted by ``distill_gain``.
     Returns the model card dict.
     """
     torch.manual_seed(seed)
@@ -94,6 +97,9 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
         model = Detector(n_cls, width_mult, anchors=anchors, img_size=img_size, scales=scales)
     # channels_last: oneDNN's convolutions and their gradients run ~1.3x faster on CPU
     model = model.to(dev, memory_format=torch.channels_last)
+    if teacher is not None:
+        check_teacher(teacher, model)
+        teacher = teacher.to(dev, memory_format=torch.channels_last).eval()
     loss_fn = YoloLoss(model.anchors).to(dev)
     loader = torch.utils.data.DataLoader(
         ds, batch_size=batch, shuffle=True, collate_fn=collate, num_workers=workers,
@@ -111,10 +117,18 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     model.train()
     for epoch in progress(range(epochs), desc='train', unit='epoch'):
         ds.set_epoch(epoch)
-        total, parts = 0.0, {'box': 0.0, 'obj': 0.0, 'cls': 0.0}
+        total, parts = 0.0, dict.fromkeys(('box', 'obj', 'cls')
+                                          + (('d_obj', 'd_box', 'd_cls') if teacher else ()), 0.0)
         for images, targets in loader:
             images = images.to(dev, non_blocking=True, memory_format=torch.channels_last)
-            loss, comp = loss_fn(model(images), targets)
+            heads = model(images)
+            loss, comp = loss_fn(heads, targets)
+            if teacher is not None:
+                with torch.no_grad():
+                    teacher_heads = teacher(images)
+                d_loss, d_comp = distill_loss(heads, teacher_heads, model.anchors.shape[1])
+                loss = loss + distill_gain * d_loss
+                comp.update(d_comp)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
@@ -135,6 +149,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
             'scales': len(model.strides), 'batch': batch, 'crop': list(crop) if crop else None,
             'hsv': list(hsv),
             'lr': lr, 'ema_decay': ema_decay, 'device': str(dev),
+            'distill_gain': distill_gain if teacher is not None else None,
             'anchors': model.anchors.tolist(), 'channels': model.channels(),
             'params': sum(p.numel() for p in params),
             'final_loss': history[-1] if history else None, 'loss_history': history,
@@ -144,6 +159,15 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     save_model(out_path, model, card)
     card_path(out_path).write_text(json.dumps(card, indent=2))
     return card
+
+
+def check_teacher(teacher, model):
+    """ValueError unless ``teacher``'s heads and anchors match ``model``'s (distillation)."""
+    same = (teacher.num_classes == model.num_classes and teacher.img_size == model.img_size
+            and teacher.anchors.shape == model.anchors.shape
+            and torch.allclose(teacher.anchors.cpu(), model.anchors.cpu(), atol=1e-3))
+    if not same:
+        raise ValueError('teacher and model differ in classes, input size or anchors')
 
 
 def ema_average(decay, ramp_steps=500):

@@ -10,6 +10,11 @@ import sys
 MODELS = 'models'
 
 
+def log_stderr(line):
+    """Progress lines go to stderr: stdout is the JSON result."""
+    print(line, file=sys.stderr, flush=True)
+
+
 def _dataset(a):
     from uav_tilt_vision.dataset import generate
     meta = generate(a.out, a.n, a.seed, a.split, a.jobs)
@@ -26,11 +31,17 @@ def _train(a):
                  device=a.device, eval_dir=a.eval_data, crop=a.crop, scales=a.scales,
                  hsv=a.hsv or HSV_GAINS,
                  model=load_model(a.init) if a.init else None,
-                 log=lambda s: print(s, file=sys.stderr, flush=True))
+                 teacher=load_model(a.teacher) if a.teacher else None,
+                 distill_gain=a.distill_gain,
+                 log=log_stderr)
+    extra = {'teacher': a.teacher} if a.teacher else {}
     if prior is not None:  # a continued run: its card names the stage it started from
-        card['init'] = {k: prior.get(k) for k in ('epochs', 'seed', 'lr', 'crop', 'hsv', 'init')}
-        card['total_epochs'] = a.epochs + prior.get('total_epochs', prior['epochs'])
-        card.update({k: prior[k] for k in ('source', 'pruning_ratio') if k in prior})
+        extra['init'] = {k: prior.get(k)
+                         for k in ('epochs', 'seed', 'lr', 'crop', 'hsv', 'init', 'teacher')}
+        extra['total_epochs'] = a.epochs + prior.get('total_epochs', prior['epochs'])
+        extra.update({k: prior[k] for k in ('source', 'pruning_ratio') if k in prior})
+    if extra:
+        card.update(extra)
         save_model(a.out, load_model(a.out), card)
         card_path(a.out).write_text(json.dumps(card, indent=2))
     return {k: v for k, v in card.items() if k != 'loss_history'}
@@ -46,7 +57,8 @@ def _eval(a):
 def _compress(a):
     from uav_tilt_vision.compress import compress
     return compress(a.model, a.data, a.out_dir, a.ratio, a.finetune_epochs, a.seed,
-                    a.calib_images, a.eval_data, crop=a.crop)
+                    a.calib_images, a.eval_data, crop=a.crop, distill_gain=a.distill_gain,
+                    log=log_stderr)
 
 
 def _quantize(a):
@@ -86,6 +98,10 @@ def parser():
     t.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
                    help='train on object-centred W x H windows (multiples of 32)')
     t.add_argument('--init', help='continue from this checkpoint (its card is cited)')
+    t.add_argument('--teacher', help='also learn to match this model\'s outputs (distillation; '
+                                     'same classes, input size and anchors)')
+    t.add_argument('--distill-gain', type=float, default=1.0,
+                   help='weight of the distillation loss (with --teacher)')
     t.add_argument('--hsv', type=float, nargs=3, metavar=('H', 'S', 'V'),
                    help='hue, saturation, value jitter of the augmentation (fractions; '
                         'default yolo_data.HSV_GAINS)')
@@ -106,6 +122,9 @@ def parser():
     c.add_argument('--eval-data', help='held-out set evaluated for every stage')
     c.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
                    help='fine-tune on object-centred W x H windows')
+    c.add_argument('--distill-gain', type=float, default=1.0,
+                   help='fine-tune also matching the unpruned model\'s outputs with this '
+                        'weight (0: labels only)')
     c.set_defaults(run=_compress)
     q = sub.add_parser('quantize', help='int8 ONNX of a pruned model only (compress step 3)')
     q.add_argument('--model', default=f'{MODELS}/detector_pruned.pt')

@@ -11,11 +11,15 @@ makes the score reflect localisation quality, useful for NMS and mAP.
 Target assignment: each ground truth box goes to the grid cell holding its centre
 for every anchor (over both scales) whose shape IoU with it exceeds ``anchor_iou``,
 and always to its single best anchor, as in YOLOv3.
+
+``distill_loss`` adds what a teacher detector outputs as a second, soft target (used to
+fine-tune a pruned model against the unpruned one).
 """
 
 import math
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from uav_tilt_vision.boxes import cell_xywh, head_view, wh_iou, xywh_to_xyxy
@@ -95,3 +99,34 @@ class YoloLoss(nn.Module):
         total = gb * l_box + go * l_obj + gc * l_cls
         parts = {'box': l_box, 'obj': l_obj, 'cls': l_cls}
         return total, {k: float(v.detach()) for k, v in parts.items()}
+
+
+def bernoulli_kl(student_logits, teacher_logits):
+    """Element-wise KL(teacher || student) of Bernoulli outputs given as logits (>= 0, and 0
+    where they agree): the soft-target BCE less the teacher's own entropy."""
+    target = teacher_logits.sigmoid()
+    return (F.binary_cross_entropy_with_logits(student_logits, target, reduction='none')
+            - F.binary_cross_entropy_with_logits(teacher_logits, target, reduction='none'))
+
+
+def distill_loss(student_heads, teacher_heads, num_anchors, eps=1e-9):
+    """Output distillation from a teacher detector with the same heads (e.g. the unpruned
+    model a pruned one came from): ``(total, {'d_obj', 'd_box', 'd_cls'})``.
+
+    Every output of these heads is a sigmoid, so each is matched with a Bernoulli KL. The
+    objectness term is averaged over all cells; the box and class terms are weighted by the
+    teacher's objectness (objectness-scaled distillation, Mehta and Ozturk 2018), because
+    what the teacher says about box and class in a background cell, most of the grid, is
+    noise that would drown the cells holding objects.
+    """
+    l_obj = l_box = l_cls = 0.0
+    for hs, ht in zip(student_heads, teacher_heads):
+        ps, pt = head_view(hs, num_anchors), head_view(ht.detach(), num_anchors)
+        kl = bernoulli_kl(ps, pt)
+        w = pt[..., 4].sigmoid()
+        norm = w.sum() + eps
+        l_obj = l_obj + kl[..., 4].mean()
+        l_box = l_box + (w * kl[..., :4].sum(-1)).sum() / norm
+        l_cls = l_cls + (w * kl[..., 5:].sum(-1)).sum() / norm
+    parts = {'d_obj': l_obj, 'd_box': l_box, 'd_cls': l_cls}
+    return l_obj + l_box + l_cls, {k: float(v.detach()) for k, v in parts.items()}
