@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from uav_tilt_vision.detector import input_batch, load_model, save_model
+from uav_tilt_vision.detector import input_batch, load_model
 from uav_tilt_vision.profile import profile_model
 from uav_tilt_vision.train import card_path, evaluate, git_commit, train
 from uav_tilt_vision.yolo_data import YoloDataset
@@ -148,11 +148,9 @@ def compress(model_path, data_dir, out_dir, ratio=0.5, finetune_epochs=4, seed=0
     teacher = load_model(model_path) if distill_gain else None
     card = train(data_dir, pruned_path, finetune_epochs, seed, lr=lr, model=pruned,
                  eval_dir=eval_dir, device='cpu', crop=crop, teacher=teacher,
-                 distill_gain=distill_gain, log=log)
-    card.update(source=str(model_path), pruning_ratio=ratio,
-                teacher=str(model_path) if teacher else None)
-    save_model(pruned_path, pruned, card)
-    card_path(pruned_path).write_text(json.dumps(card, indent=2))
+                 distill_gain=distill_gain, log=log,
+                 card_extra={'source': str(model_path), 'pruning_ratio': ratio,
+                             'teacher': str(model_path) if teacher else None})
     report['pruned'] = {**size_stats(pruned), 'path': str(pruned_path),
                         **(card['metrics'] or {})}
     report['int8'] = quantize(pruned_path, data_dir, calib_images, eval_dir)

@@ -62,7 +62,7 @@ def num_classes_of(dataset, meta):
 def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_SIZE, batch=16,
           device='auto', lr=3e-3, weight_decay=5e-4, augment=True, hflip=False, anchors=None,
           eval_dir=None, workers=0, log=print, model=None, crop=None, ema_decay=0.999,
-          scales=2, hsv=HSV_GAINS, teacher=None, distill_gain=1.0):
+          scales=2, hsv=HSV_GAINS, teacher=None, distill_gain=1.0, card_extra=None):
     """Train a ``Detector`` and write weights (``save_model``) plus a model card JSON beside them.
 
     ``anchors`` None = k-means on the training labels (defaults when too few boxes).
@@ -77,6 +77,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     ``teacher``: a ``Detector`` with the same heads and anchors (e.g. the unpruned model a
     pruned ``model`` came from) whose outputs the model also learns to match, with
     ``yolo_loss.distill_loss`` weighted by ``distill_gain``.
+    ``card_extra``: entries added to the model card (e.g. the lineage of a fine-tuned model).
     Returns the model card dict.
     """
     torch.manual_seed(seed)
@@ -117,8 +118,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     model.train()
     for epoch in progress(range(epochs), desc='train', unit='epoch'):
         ds.set_epoch(epoch)
-        total, parts = 0.0, dict.fromkeys(('box', 'obj', 'cls')
-                                          + (('d_obj', 'd_box', 'd_cls') if teacher else ()), 0.0)
+        total, parts = 0.0, {}
         for images, targets in loader:
             images = images.to(dev, non_blocking=True, memory_format=torch.channels_last)
             heads = model(images)
@@ -135,7 +135,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
             sched.step()
             ema.update_parameters(model)
             total += loss.item()
-            parts = {k: parts[k] + comp[k] for k in parts}
+            parts = {k: parts.get(k, 0.0) + v for k, v in comp.items()}
         history.append(total / len(loader))
         log(f'epoch {epoch + 1}/{epochs} loss {history[-1]:.4f} '
             + ' '.join(f'{k} {v / len(loader):.4f}' for k, v in parts.items()))
@@ -154,7 +154,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
             'params': sum(p.numel() for p in params),
             'final_loss': history[-1] if history else None, 'loss_history': history,
             'metrics': evaluate(model, eval_dir) if eval_dir else None,
-            'git_commit': git_commit()}
+            'git_commit': git_commit(), **(card_extra or {})}
     Path(out_path).parent.mkdir(parents=True, exist_ok=True)
     save_model(out_path, model, card)
     card_path(out_path).write_text(json.dumps(card, indent=2))

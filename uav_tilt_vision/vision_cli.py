@@ -22,28 +22,22 @@ def _dataset(a):
 
 
 def _train(a):
-    from uav_tilt_vision.detector import load_model, save_model
+    from uav_tilt_vision.detector import load_model
     from uav_tilt_vision.train import card_path, train
     from uav_tilt_vision.yolo_data import HSV_GAINS
-    # read before training: --out may overwrite --init
-    prior = json.loads(card_path(a.init).read_text()) if a.init else None
+    extra = {'teacher': a.teacher} if a.teacher else {}
+    if a.init:  # a continued run: its card names the stage it started from
+        prior = json.loads(card_path(a.init).read_text())
+        extra['init'] = {k: prior.get(k)
+                         for k in ('epochs', 'seed', 'lr', 'crop', 'hsv', 'init', 'teacher')}
+        extra['total_epochs'] = a.epochs + prior.get('total_epochs', prior['epochs'])
+        extra.update({k: prior[k] for k in ('source', 'pruning_ratio') if k in prior})
     card = train(a.data, a.out, a.epochs, a.seed, a.width_mult, batch=a.batch, lr=a.lr,
                  device=a.device, eval_dir=a.eval_data, crop=a.crop, scales=a.scales,
                  hsv=a.hsv or HSV_GAINS,
                  model=load_model(a.init) if a.init else None,
                  teacher=load_model(a.teacher) if a.teacher else None,
-                 distill_gain=a.distill_gain,
-                 log=log_stderr)
-    extra = {'teacher': a.teacher} if a.teacher else {}
-    if prior is not None:  # a continued run: its card names the stage it started from
-        extra['init'] = {k: prior.get(k)
-                         for k in ('epochs', 'seed', 'lr', 'crop', 'hsv', 'init', 'teacher')}
-        extra['total_epochs'] = a.epochs + prior.get('total_epochs', prior['epochs'])
-        extra.update({k: prior[k] for k in ('source', 'pruning_ratio') if k in prior})
-    if extra:
-        card.update(extra)
-        save_model(a.out, load_model(a.out), card)
-        card_path(a.out).write_text(json.dumps(card, indent=2))
+                 distill_gain=a.distill_gain, card_extra=extra, log=log_stderr)
     return {k: v for k, v in card.items() if k != 'loss_history'}
 
 
