@@ -14,7 +14,22 @@ def det(box, score, cls=0):
 
 def test_perfect_detection_scores_one():
     assert coco_map([np.array([det([0, 0, 10, 10], 0.9)])], [GT]) == \
-        {'map50': 1.0, 'map50_95': 1.0}
+        {'map50': 1.0, 'map50_95': 1.0, 'ap50_per_class': {0: 1.0},
+         'map50_by_area': {'small': 1.0, 'medium': None, 'large': None}}
+
+
+def test_area_ranges_ignore_what_lies_outside_them():
+    gts = [np.array([[0, 0, 10, 10, 0], [50, 50, 90, 90, 0.0]])]    # 100 and 1600 px^2
+    preds = [np.array([det([100, 100, 140, 140], 0.95),   # medium, matches nothing
+                       det([50, 50, 90, 90], 0.9),        # the medium one
+                       det([200, 200, 210, 210], 0.7),    # small, matches nothing
+                       det([0, 0, 10, 10], 0.5)])]        # the small one
+    res = coco_map(preds, gts)
+    # in each range: a false positive, then a hit; the other range's detections are
+    # ignored, so precision is 1/2 at full recall (1/4 if they counted as false positives)
+    assert res['map50_by_area'] == {'small': pytest.approx(0.5), 'medium': pytest.approx(0.5),
+                                    'large': None}
+    assert res['map50'] == pytest.approx(0.5)
 
 
 def test_iou_062_matches_three_of_ten_thresholds():
@@ -44,11 +59,22 @@ def test_lower_scored_duplicate_does_not_lower_ap():
     assert coco_map(preds, [GT])['map50'] == pytest.approx(1.0)
 
 
+def test_counted_ground_truth_wins_over_a_better_overlapping_ignored_one():
+    gts = [np.array([[0, 0, 30, 30, 0], [0, 0, 40, 40, 0.0]])]      # small, medium
+    preds = [np.array([det([0, 0, 31, 31], 0.9)])]   # IoU 0.94 with the small, 0.60 medium
+    res = coco_map(preds, gts)
+    # over all areas it takes the small one and the medium one is missed (half recall)
+    assert res['map50'] == pytest.approx(51 / 101)
+    assert res['map50_by_area'] == {'small': 1.0, 'medium': 1.0, 'large': None}
+
+
 def test_classes_without_gt_ignored_and_missed_classes_zero():
     gts = [np.array([[0, 0, 10, 10, 0], [20, 20, 30, 30, 1.0]])]
     preds = [np.array([det([0, 0, 10, 10], 0.9, 0), det([40, 40, 50, 50], 0.9, 2)])]
     # class 0 AP 1, class 1 AP 0 (no detection), class 2 has no gt and is not averaged
-    assert coco_map(preds, gts)['map50'] == pytest.approx(0.5)
+    res = coco_map(preds, gts)
+    assert res['map50'] == pytest.approx(0.5)
+    assert res['ap50_per_class'] == {0: 1.0, 1: 0.0}
 
 
 def test_only_100_detections_per_image_count():
@@ -70,12 +96,14 @@ def random_set(seed, n_img=12):
     preds, gts = [], []
     for _ in range(n_img):
         g = rng.uniform(0, 200, (rng.integers(0, 6), 2))
-        g = np.concatenate([g, g + rng.uniform(8, 60, g.shape), rng.integers(0, 3, (len(g), 1))],
-                           1)
+        # sides of 8-130 px: COCO's small, medium and large objects
+        g = np.concatenate([g, g + rng.uniform(8, 130, g.shape),
+                            rng.integers(0, 3, (len(g), 1))], 1)
         jitter = rng.normal(0, 4, (len(g), 4)).clip(-3.9, 3.9)  # sizes >= 8 stay positive
         p = np.concatenate([g[:, :4] + jitter, rng.uniform(0.2, 1, (len(g), 1)), g[:, 4:]], 1)
         extra = rng.uniform(0, 200, (rng.integers(0, 4), 2))
-        extra = np.concatenate([extra, extra + 20, rng.uniform(0, 1, (len(extra), 1)),
+        extra = np.concatenate([extra, extra + rng.uniform(8, 130, extra.shape),
+                                rng.uniform(0, 1, (len(extra), 1)),
                                 rng.integers(0, 3, (len(extra), 1))], 1)
         preds.append(np.concatenate([p, extra]))
         gts.append(g)
@@ -91,3 +119,5 @@ def test_agrees_with_pycocotools(seed):
     assert ref['backend'] == 'pycocotools'
     assert ours['map50'] == pytest.approx(ref['map50'], abs=1e-9)
     assert ours['map50_95'] == pytest.approx(ref['map50_95'], abs=1e-9)
+    assert ours['ap50_per_class'] == pytest.approx(ref['ap50_per_class'], abs=1e-9)
+    assert ours['map50_by_area'] == pytest.approx(ref['map50_by_area'], abs=1e-9)

@@ -127,6 +127,8 @@ def test_train_one_epoch_writes_loadable_model(data8, tmp_path):
     assert dets[0].shape[1] == 6
     metrics = evaluate(model, data8)
     assert 0.0 <= metrics['map50_95'] <= metrics['map50'] <= 1.0
+    # per-class AP is keyed by the data set's class names
+    assert set(metrics['ap50_per_class']) == {'rect', 'disc', 'tri'}
 
 
 def test_training_is_reproducible(data8, tmp_path):

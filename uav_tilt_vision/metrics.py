@@ -2,10 +2,12 @@
 
 ``mean_ap`` uses pycocotools (the reference implementation) when it is importable and
 falls back to ``coco_map``, a self-contained re-implementation of COCOeval's bbox
-protocol for one area range ('all') and maxDets = 100: greedy matching of detections
-in descending score order to the unmatched ground truth of highest IoU >= t, a
-monotone precision envelope sampled at 101 recall points, averaged over the IoU
-thresholds 0.50:0.05:0.95 and over the classes that have ground truth.
+protocol with maxDets = 100: greedy matching of detections in descending score order to
+the unmatched ground truth of highest IoU >= t, a monotone precision envelope sampled at
+101 recall points, averaged over the IoU thresholds 0.50:0.05:0.95 and over the classes
+that have ground truth. Both also give AP@0.5 per class and by COCO's object-area ranges
+(small < 32^2 px <= medium < 96^2 px <= large): ground truth outside a range is ignored,
+and so are the detections matched to it or, unmatched, outside the range themselves.
 
 Inputs: ``preds`` one (N, 6) array [x1, y1, x2, y2, score, class] per image, ``gts``
 one (M, 5) array [x1, y1, x2, y2, class] per image, in the same pixel frame.
@@ -21,10 +23,12 @@ from uav_tilt_vision.boxes import box_iou
 IOU_THRESHOLDS = np.linspace(0.5, 0.95, 10)
 RECALL_POINTS = np.linspace(0.0, 1.0, 101)
 MAX_DETS = 100
+AREA_RANGES = {'small': (0.0, 32.0 ** 2), 'medium': (32.0 ** 2, 96.0 ** 2),
+               'large': (96.0 ** 2, 1e10)}   # px^2, COCO's, bounds inclusive as in COCOeval
 
 
 def mean_ap(preds, gts):
-    """{'map50', 'map50_95', 'backend'} with pycocotools if available, else ``coco_map``."""
+    """``coco_map``'s result plus 'backend', with pycocotools if available."""
     try:
         import pycocotools  # noqa: F401
     except ImportError:
@@ -33,48 +37,82 @@ def mean_ap(preds, gts):
 
 
 def coco_map(preds, gts):
-    """COCO bbox mAP (101-point interpolated AP): {'map50', 'map50_95'}; nan without any gt."""
+    """COCO bbox mAP (101-point interpolated AP).
+
+    {'map50', 'map50_95', 'ap50_per_class': {class id: AP@0.5}, 'map50_by_area': {range:
+    mAP@0.5}}; nan (None for a range) where there is no ground truth to average over.
+    """
     preds = [np.asarray(p, dtype=np.float64).reshape(-1, 6) for p in preds]
     gts = [np.asarray(g, dtype=np.float64).reshape(-1, 5) for g in gts]
-    classes = np.unique(np.concatenate([g[:, 4] for g in gts]))
+    classes = np.unique(np.concatenate([g[:, 4] for g in gts])).astype(int)
     if len(classes) == 0:
-        return {'map50': float('nan'), 'map50_95': float('nan')}
+        return {'map50': float('nan'), 'map50_95': float('nan'), 'ap50_per_class': {},
+                'map50_by_area': dict.fromkeys(AREA_RANGES)}
     ap = np.array([class_ap(preds, gts, c) for c in classes])  # (classes, thresholds)
-    return {'map50': float(ap[:, 0].mean()), 'map50_95': float(ap.mean())}
+    by_area = {}
+    for name, rng in AREA_RANGES.items():
+        ap50 = [a[0] for a in (class_ap(preds, gts, c, rng) for c in classes) if a is not None]
+        by_area[name] = float(np.mean(ap50)) if ap50 else None
+    return {'map50': float(ap[:, 0].mean()), 'map50_95': float(ap.mean()),
+            'ap50_per_class': {int(c): float(a) for c, a in zip(classes, ap[:, 0])},
+            'map50_by_area': by_area}
 
 
-def class_ap(preds, gts, cls):
-    """AP of one class at every IoU threshold, shape (len(IOU_THRESHOLDS),)."""
-    scores, matched = [], []
+def area(boxes):
+    """Areas (px^2) of (N, 4) xyxy boxes."""
+    return (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+
+
+def class_ap(preds, gts, cls, area_rng=(0.0, np.inf)):
+    """AP of one class at every IoU threshold, shape (len(IOU_THRESHOLDS),).
+
+    Only ground truth whose area is in ``area_rng`` counts; None when there is none.
+    """
+    scores, matched, ignored = [], [], []
     n_gt = 0
     for p, g in zip(preds, gts):
         p = p[p[:, 5] == cls]
         p = p[np.argsort(-p[:, 4], kind='mergesort')][:MAX_DETS]
         g = g[g[:, 4] == cls]
-        n_gt += len(g)
+        g_ignored = (area(g) < area_rng[0]) | (area(g) > area_rng[1])
+        n_gt += int((~g_ignored).sum())
+        tp, d_ignored = match(p[:, :4], g[:, :4], g_ignored)
+        outside = (area(p) < area_rng[0]) | (area(p) > area_rng[1])
         scores.append(p[:, 4])
-        matched.append(match(p[:, :4], g[:, :4]))
-    scores = np.concatenate(scores)
-    order = np.argsort(-scores, kind='mergesort')
+        matched.append(tp)
+        ignored.append(d_ignored | (~tp & outside))
+    if n_gt == 0:
+        return None
+    order = np.argsort(-np.concatenate(scores), kind='mergesort')
     tp = np.concatenate(matched, 1)[:, order]
-    return np.array([interpolated_ap(t, n_gt) for t in tp])
+    ignored = np.concatenate(ignored, 1)[:, order]
+    return np.array([interpolated_ap(t[~i], n_gt) for t, i in zip(tp, ignored)])
 
 
-def match(det, gt):
-    """(thresholds, n_det) bool: detection (score-sorted) matched a ground truth at IoU >= t."""
+def match(det, gt, gt_ignored):
+    """Greedy COCO matching of score-sorted detections to ground truth.
+
+    Returns (matched, ignored), each (thresholds, n_det) bool: the detection matched a
+    ground truth at IoU >= t, and that ground truth was an ignored one.
+    """
     tp = np.zeros((len(IOU_THRESHOLDS), len(det)), dtype=bool)
+    ignored = np.zeros_like(tp)
     if len(det) == 0 or len(gt) == 0:
-        return tp
+        return tp, ignored
     iou = box_iou(det, gt)
     for ti, t in enumerate(IOU_THRESHOLDS):
         taken = np.zeros(len(gt), dtype=bool)
         for d in range(len(det)):
             cand = np.where(taken, -1.0, iou[d])
-            g = int(cand.argmax())
+            # a counted ground truth wins over an ignored one whatever their IoUs
+            counted = np.where(gt_ignored, -1.0, cand)
             # COCOeval compares against min(t, 1 - 1e-10) with '<', so IoU == t matches
-            if cand[g] >= min(t, 1 - 1e-10):
+            thr = min(t, 1 - 1e-10)
+            g = int(counted.argmax()) if counted.max() >= thr else int(cand.argmax())
+            if cand[g] >= thr:
                 taken[g] = tp[ti, d] = True
-    return tp
+                ignored[ti, d] = gt_ignored[g]
+    return tp, ignored
 
 
 def interpolated_ap(tp, n_gt):
@@ -92,7 +130,7 @@ def interpolated_ap(tp, n_gt):
 
 
 def pycocotools_map(preds, gts):
-    """The same metric computed by pycocotools' COCOeval: {'map50', 'map50_95'}."""
+    """The same metrics computed by pycocotools' COCOeval (its default area ranges)."""
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
 
@@ -106,10 +144,9 @@ def pycocotools_map(preds, gts):
         for x1, y1, x2, y2, s, c in np.asarray(p, dtype=float).reshape(-1, 6):
             dets.append({'image_id': i, 'category_id': int(c),
                          'bbox': [x1, y1, x2 - x1, y2 - y1], 'score': s})
-    if not classes:
-        return {'map50': float('nan'), 'map50_95': float('nan')}
-    if not dets:
-        return {'map50': 0.0, 'map50_95': 0.0}
+    if not classes or not dets:
+        # COCOeval cannot load an empty result list; coco_map gives the same numbers
+        return coco_map(preds, gts)
     with contextlib.redirect_stdout(io.StringIO()):  # COCO prints progress and a table
         gt = COCO()
         gt.dataset = {'images': [{'id': i} for i in range(len(gts))], 'annotations': anns,
@@ -119,4 +156,12 @@ def pycocotools_map(preds, gts):
         ev.evaluate()
         ev.accumulate()
         ev.summarize()
-    return {'map50': float(ev.stats[1]), 'map50_95': float(ev.stats[0])}
+    # precision[threshold, recall, class, area range, max dets]; -1 where no ground truth
+    ap50 = ev.eval['precision'][0, :, :, :, ev.params.maxDets.index(MAX_DETS)]
+    by_area = {}
+    for name in AREA_RANGES:
+        a = ap50[:, :, ev.params.areaRngLbl.index(name)]
+        by_area[name] = float(a[a > -1].mean()) if (a > -1).any() else None
+    return {'map50': float(ev.stats[1]), 'map50_95': float(ev.stats[0]),
+            'ap50_per_class': {c: float(ap50[:, k, 0].mean()) for k, c in enumerate(classes)},
+            'map50_by_area': by_area}

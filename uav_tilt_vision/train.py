@@ -185,7 +185,9 @@ def ema_average(decay, ramp_steps=500):
 
 
 def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
-    """COCO-style mAP of ``model`` on a YOLO-format set: {'map50', 'map50_95', 'backend'}.
+    """COCO-style mAP of ``model`` on a YOLO-format set (``metrics.mean_ap``).
+
+    AP@0.5 per class is keyed by the class names of the set's meta.json where it has them.
 
     ``model``: a ``Detector`` or any object whose ``predict(images, conf_thres, iou_thres)``
     maps a list of uint8 RGB images to one (N, 6) array each (``backends``).
@@ -196,4 +198,8 @@ def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
         images = [ds.read_rgb(i) for i in range(start, min(start + batch, len(ds)))]
         preds.extend(model.predict(images, conf_thres, iou_thres))
         gts.extend(ds.ground_truth(start + k, img.shape) for k, img in enumerate(images))
-    return mean_ap(preds, gts)
+    res = mean_ap(preds, gts)
+    names = read_meta(data_dir).get('classes')
+    if names:
+        res['ap50_per_class'] = {names[c]: ap for c, ap in res['ap50_per_class'].items()}
+    return res
