@@ -1,4 +1,5 @@
 """Config dataclasses as ROS 2 parameters, and the standard node main()."""
+import signal
 import sys
 
 import rclpy
@@ -28,6 +29,7 @@ def run_node(node_factory, args=None):
 
     A bad parameter ends the process with exit code 2 and one log line.
     """
+    interrupted = note_sigint()
     rclpy.init(args=args)
     node = None
     code = 0
@@ -42,10 +44,26 @@ def run_node(node_factory, args=None):
     except RuntimeError:
         # A signal shuts the context down under the executor: a callback that publishes
         # then raises RCLError, a message take a pybind RuntimeError. Neither is an error.
-        if rclpy.ok():
+        # The KeyboardInterrupt can also land inside a take before the context is down,
+        # and pybind turns it into a RuntimeError too.
+        if rclpy.ok() and not interrupted:
             raise
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def note_sigint():
+    """A list that gets the signal number when SIGINT arrives; the Python handler before
+    still runs. Call before rclpy.init, whose signal handler then chains to this one."""
+    seen, previous = [], signal.getsignal(signal.SIGINT)
+
+    def handler(signum, frame):
+        seen.append(signum)
+        if callable(previous):
+            previous(signum, frame)
+
+    signal.signal(signal.SIGINT, handler)
+    return seen
