@@ -59,11 +59,15 @@ def xyxy_to_xywh(b):
     return cat([(x1 + x2) / 2, (y1 + y2) / 2, x2 - x1, y2 - y1], -1)
 
 
+def box_area(b):
+    """Areas of (N, 4) xyxy boxes; numpy or torch."""
+    return (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+
+
 def box_iou(a, b):
     """Pairwise IoU of xyxy boxes: (N, 4) x (M, 4) -> (N, M); numpy or torch."""
     lib = torch if isinstance(a, torch.Tensor) else np
-    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
-    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    area_a, area_b = box_area(a), box_area(b)
     lt = lib.maximum(a[:, None, :2], b[None, :, :2])
     rb = lib.minimum(a[:, None, 2:4], b[None, :, 2:4])
     wh = (rb - lt).clip(0) if lib is np else (rb - lt).clamp(min=0)

@@ -18,7 +18,7 @@ import io
 
 import numpy as np
 
-from uav_tilt_vision.boxes import box_iou
+from uav_tilt_vision.boxes import box_area, box_iou
 
 IOU_THRESHOLDS = np.linspace(0.5, 0.95, 10)
 RECALL_POINTS = np.linspace(0.0, 1.0, 101)
@@ -58,9 +58,10 @@ def coco_map(preds, gts):
             'map50_by_area': by_area}
 
 
-def area(boxes):
-    """Areas (px^2) of (N, 4) xyxy boxes."""
-    return (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+def outside(boxes, area_rng):
+    """(N,) bool: the area (px^2) of an xyxy box is outside the inclusive ``area_rng``."""
+    area = box_area(boxes)
+    return (area < area_rng[0]) | (area > area_rng[1])
 
 
 def class_ap(preds, gts, cls, area_rng=(0.0, np.inf)):
@@ -74,13 +75,12 @@ def class_ap(preds, gts, cls, area_rng=(0.0, np.inf)):
         p = p[p[:, 5] == cls]
         p = p[np.argsort(-p[:, 4], kind='mergesort')][:MAX_DETS]
         g = g[g[:, 4] == cls]
-        g_ignored = (area(g) < area_rng[0]) | (area(g) > area_rng[1])
+        g_ignored = outside(g[:, :4], area_rng)
         n_gt += int((~g_ignored).sum())
         tp, d_ignored = match(p[:, :4], g[:, :4], g_ignored)
-        outside = (area(p) < area_rng[0]) | (area(p) > area_rng[1])
         scores.append(p[:, 4])
         matched.append(tp)
-        ignored.append(d_ignored | (~tp & outside))
+        ignored.append(d_ignored | (~tp & outside(p[:, :4], area_rng)))
     if n_gt == 0:
         return None
     order = np.argsort(-np.concatenate(scores), kind='mergesort')
