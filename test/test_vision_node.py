@@ -151,10 +151,16 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
         lambda m: odom.__setitem__(ros_msgs.stamp_ns(m.header.stamp), m), KEEP_ALL)
     plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
                   params={'scenario_file': str(hover_scenario(tmp_path)), 'rtf': 0.5})
-    driver = start('uav_tilt_tools.hover_driver', '--ticks', '1000000000',
-                   '--out', str(tmp_path / 'driver.json'), log_path=tmp_path / 'driver.log')
     vision = start('uav_tilt_vision.vision_node', log_path=tmp_path / 'vision.log',
                    params={'status_rate_hz': 10.0})
+    # Nothing moves before the driver steps the lockstep plant: start it once the probe
+    # sees both writers, so that no pose or odometry goes out before they match the probe
+    # (a timeout here shows up as missing poses below; the finally block still stops all).
+    probe.spin_until(lambda: all(
+        probe.node.count_publishers(topic) for topic in (names.TARGET_POSE,
+                                                         names.GROUND_TRUTH_ODOM)), 30.0)
+    driver = start('uav_tilt_tools.hover_driver', '--ticks', '1000000000',
+                   '--out', str(tmp_path / 'driver.json'), log_path=tmp_path / 'driver.log')
     try:
         assert probe.spin_until(lambda: len(probe.messages[names.TARGET_POSE]) >= 60, 60.0), \
             (tmp_path / 'vision.log').read_text()
