@@ -62,7 +62,8 @@ def num_classes_of(dataset, meta):
 def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_SIZE, batch=16,
           device='auto', lr=3e-3, weight_decay=5e-4, augment=True, hflip=False, anchors=None,
           eval_dir=None, workers=0, log=print, model=None, crop=None, ema_decay=0.999,
-          scales=2, hsv=HSV_GAINS, teacher=None, distill_gain=1.0, card_extra=None):
+          scales=2, hsv=HSV_GAINS, teacher=None, distill_gain=1.0, card_extra=None,
+          bf16=False):
     """Train a ``Detector`` and write weights (``save_model``) plus a model card JSON beside them.
 
     ``anchors`` None = k-means on the training labels (defaults when too few boxes).
@@ -78,6 +79,8 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     pruned ``model`` came from) whose outputs the model also learns to match, with
     ``yolo_loss.distill_loss`` weighted by ``distill_gain``.
     ``card_extra``: entries added to the model card (e.g. the lineage of a fine-tuned model).
+    ``bf16``: run the networks' forward passes in bfloat16 autocast (weights, optimiser and
+    loss stay float32); about 1.5x faster steps on CPUs with AVX-512 BF16.
     Returns the model card dict.
     """
     torch.manual_seed(seed)
@@ -121,11 +124,13 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
         total, parts = 0.0, {}
         for images, targets in loader:
             images = images.to(dev, non_blocking=True, memory_format=torch.channels_last)
-            heads = model(images)
+            with torch.autocast(dev.type, dtype=torch.bfloat16, enabled=bf16):
+                heads = [h.float() for h in model(images)]
+                if teacher is not None:
+                    with torch.no_grad():
+                        teacher_heads = [h.float() for h in teacher(images)]
             loss, comp = loss_fn(heads, targets)
             if teacher is not None:
-                with torch.no_grad():
-                    teacher_heads = teacher(images)
                 d_loss, d_comp = distill_loss(heads, teacher_heads, model.anchors.shape[1])
                 loss = loss + distill_gain * d_loss
                 comp.update(d_comp)
@@ -148,7 +153,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
             'seed': seed, 'width_mult': model.width_mult, 'img_size': list(model.img_size),
             'scales': len(model.strides), 'batch': batch, 'crop': list(crop) if crop else None,
             'hsv': list(hsv),
-            'lr': lr, 'ema_decay': ema_decay, 'device': str(dev),
+            'lr': lr, 'ema_decay': ema_decay, 'device': str(dev), 'bf16': bool(bf16),
             'distill_gain': distill_gain if teacher is not None else None,
             'anchors': model.anchors.tolist(), 'channels': model.channels(),
             'params': sum(p.numel() for p in params),
