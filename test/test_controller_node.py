@@ -20,8 +20,6 @@ def probe():
 
 
 def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
-    plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
-                  params={'camera_enabled': 'false'})
     controller = start('uav_tilt_control.controller_node', log_path=tmp_path / 'controller.log',
                        params={'target_source': 'ground_truth', 'autostart': 'inspect',
                                'mission.hold_time_s': 2.0})
@@ -34,9 +32,16 @@ def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
         statuses.append(values)
 
     statuses = []
+    plant = None
     try:
         probe.node.create_subscription(DiagnosticArray, names.CONTROLLER_STATUS, on_status,
                                        ros_qos.STATUS)
+        # The mission cannot start before the lockstep plant runs: start it only once the
+        # probe sees the status writer, so that no mode is published before discovery.
+        assert probe.spin_until(
+            lambda: probe.node.count_publishers(names.CONTROLLER_STATUS) > 0, 30.0)
+        plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
+                      params={'camera_enabled': 'false'})
         # A setpoint in the wrong frame is rejected and counted, and changes nothing.
         pub = probe.node.create_publisher(PoseStamped, names.SETPOINT_POSE, ros_qos.CONTROL)
         assert probe.spin_until(lambda: pub.get_subscription_count() > 0, 30.0)
@@ -50,7 +55,7 @@ def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
         assert done, (modes, [p.read_text()[-2000:] for p in logs])
     finally:
         code_c, _ = stop(controller)
-        code_p, _ = stop(plant)
+        code_p = stop(plant)[0] if plant else None
     seen = [m for m in modes if m != 'WAITING_FOR_SENSORS']
     # in the mission's order, each mode once, ending landed
     remaining = iter(MISSION_MODES)
