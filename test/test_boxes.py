@@ -49,6 +49,10 @@ def test_box_iou_hand_cases(lib):
              [0.0, 0.0, 1.0, 2.0]])
     # overlap 1 / union 7; identical; disjoint; half-contained 2 / 4
     np.testing.assert_allclose(np.asarray(box_iou(a, b)), [[1 / 7, 1, 0, 0.5]], atol=1e-9)
+    # as crowd regions: the share of a inside each, 1 / 4, 1, 0 and 2 / 4
+    crowd = lib([True, True, True, True])
+    np.testing.assert_allclose(np.asarray(box_iou(a, b, crowd)), [[0.25, 1, 0, 0.5]],
+                               atol=1e-9)
 
 
 def test_wh_iou_hand_case():

@@ -26,6 +26,8 @@ def test_yolo_layout_and_meta(small_set):
     assert saved['seed'] == 4 and saved['split_spec']['wall_families']
     rows = np.concatenate([read_labels(f) for f in sorted((out / 'labels').iterdir())])
     assert len(rows) == sum(meta['boxes_per_class']) > 0
+    assert sorted(f.name for f in (out / 'ignore').iterdir()) == \
+        sorted(f.name for f in (out / 'labels').iterdir())
     assert set(rows[:, 0].astype(int)) <= set(range(len(OBJECT_CLASSES)))
     assert np.all((rows[:, 1:] > 0) & (rows[:, 1:] <= 1))
 
@@ -34,8 +36,9 @@ def test_same_seed_same_images_any_job_count(small_set, tmp_path):
     out, _ = small_set
     dataset.generate(tmp_path, 9, seed=4, jobs=2, show_progress=False)
     for name in ('000000', '000008'):
-        assert (tmp_path / 'labels' / f'{name}.txt').read_text() == \
-            (out / 'labels' / f'{name}.txt').read_text()
+        for folder in ('labels', 'ignore'):
+            assert (tmp_path / folder / f'{name}.txt').read_text() == \
+                (out / folder / f'{name}.txt').read_text()
         assert (tmp_path / 'images' / f'{name}.png').read_bytes() == \
             (out / 'images' / f'{name}.png').read_bytes()
 
@@ -49,11 +52,12 @@ def test_splits_are_disjoint():
         assert a[1] <= b[0] or b[1] <= a[0], field
 
 
-def test_boxes_match_the_projected_object_faces():
-    """Unoccluded objects fully in view: box == bounds of the projected face corners."""
+@pytest.fixture(scope='module')
+def views():
+    """(info, seg, eye, R_cam) of 24 training-split views: 4 in each of 6 worlds."""
     cam = CameraConfig()
     client = p.connect(p.DIRECT)
-    checked = 0
+    out = []
     try:
         for world in range(6):
             rng = np.random.default_rng([11, world])
@@ -61,31 +65,67 @@ def test_boxes_match_the_projected_object_faces():
             for _ in range(4):
                 eye, R_cam = dataset.camera_pose(rng, info, cam)
                 _, _, seg = render(client, cam, eye, R_cam, segmentation=True)
-                rows = dataset.labels_from_segmentation(seg, info, eye, R_cam, cam)
-                for obj in info.objects:
-                    corners = [obj.centre_map + info.R_map_wall @ [su, sv, 0.0]
-                               for su in (-OBJECT_SIZE_M / 2, OBJECT_SIZE_M / 2)
-                               for sv in (-OBJECT_SIZE_M / 2, OBJECT_SIZE_M / 2)]
-                    pc = np.array([R_cam.T @ (c - eye) for c in corners])
-                    uv = (cam.k_matrix() @ pc.T).T
-                    uv = uv[:, :2] / uv[:, 2:]
-                    inside = np.all((uv > 2) & (uv < [cam.width - 2, cam.height - 2]))
-                    if not inside or np.count_nonzero(seg == obj.body) < 400:
-                        continue
-                    box = np.concatenate([uv.min(0), uv.max(0)])
-                    labelled = [[(cx - w / 2) * cam.width, (cy - h / 2) * cam.height,
-                                 (cx + w / 2) * cam.width, (cy + h / 2) * cam.height]
-                                for c, cx, cy, w, h in rows
-                                if c == OBJECT_CLASSES.index(obj.cls)]
-                    assert labelled, 'a fully visible object got no label'
-                    best = min(labelled, key=lambda b: np.abs(np.subtract(b, box)).max())
-                    # 1.5 px: rasterisation of the edges (pixel centres) on each side
-                    np.testing.assert_allclose(best, box, atol=1.5)
-                    checked += 1
+                out.append((info, seg, eye, R_cam))
             p.resetSimulation(physicsClientId=client)
     finally:
         p.disconnect(client)
+    return out
+
+
+def test_boxes_match_the_projected_object_faces(views):
+    """Unoccluded objects fully in view: box == bounds of the projected face corners."""
+    cam = CameraConfig()
+    checked = 0
+    for info, seg, eye, R_cam in views:
+        rows, _ = dataset.labels_from_segmentation(seg, info, eye, R_cam, cam)
+        for obj in info.objects:
+            corners = [obj.centre_map + info.R_map_wall @ [su, sv, 0.0]
+                       for su in (-OBJECT_SIZE_M / 2, OBJECT_SIZE_M / 2)
+                       for sv in (-OBJECT_SIZE_M / 2, OBJECT_SIZE_M / 2)]
+            pc = np.array([R_cam.T @ (c - eye) for c in corners])
+            uv = (cam.k_matrix() @ pc.T).T
+            uv = uv[:, :2] / uv[:, 2:]
+            inside = np.all((uv > 2) & (uv < [cam.width - 2, cam.height - 2]))
+            if not inside or np.count_nonzero(seg == obj.body) < 400:
+                continue
+            box = np.concatenate([uv.min(0), uv.max(0)])
+            labelled = [[(cx - w / 2) * cam.width, (cy - h / 2) * cam.height,
+                         (cx + w / 2) * cam.width, (cy + h / 2) * cam.height]
+                        for c, cx, cy, w, h in rows
+                        if c == OBJECT_CLASSES.index(obj.cls)]
+            assert labelled, 'a fully visible object got no label'
+            best = min(labelled, key=lambda b: np.abs(np.subtract(b, box)).max())
+            # 1.5 px: rasterisation of the edges (pixel centres) on each side
+            np.testing.assert_allclose(best, box, atol=1.5)
+            checked += 1
     assert checked >= 3
+
+
+def test_every_object_in_view_is_labelled_or_an_ignore_region(views):
+    """Objects with visible pixels split by the visibility rule; none is dropped."""
+    cam = CameraConfig()
+    n_ignored = 0
+    for info, seg, eye, R_cam in views:
+        rows, ignore = dataset.labels_from_segmentation(seg, info, eye, R_cam, cam)
+        expected = {True: [], False: []}
+        for obj in info.objects:
+            ys, xs = np.nonzero(seg == obj.body)
+            if len(xs) == 0:
+                continue
+            full = dataset.projected_area(obj.centre_map, info.R_map_wall, eye, R_cam, cam)
+            visible = len(xs) >= max(dataset.MIN_VISIBLE_PX,
+                                     dataset.MIN_VISIBLE_FRACTION * full)
+            # pixel bounds, centre and size normalised like a YOLO row
+            x1, x2, y1, y2 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
+            expected[visible].append([OBJECT_CLASSES.index(obj.cls),
+                                      (x1 + x2) / 2 / cam.width, (y1 + y2) / 2 / cam.height,
+                                      (x2 - x1) / cam.width, (y2 - y1) / cam.height])
+        np.testing.assert_allclose(np.reshape(rows, (-1, 5)),
+                                   np.reshape(expected[True], (-1, 5)))
+        np.testing.assert_allclose(np.reshape(ignore, (-1, 5)),
+                                   np.reshape(expected[False], (-1, 5)))
+        n_ignored += len(ignore)
+    assert n_ignored >= 1, 'no view has a partly visible object; the test checks nothing'
 
 
 def test_photometric_keeps_shape_and_changes_pixels():

@@ -91,6 +91,38 @@ def test_greedy_matching_across_images():
     assert coco_map([np.zeros((0, 6)), np.zeros((0, 6))], gts)['map50'] == 0.0
 
 
+def test_detections_inside_ignore_regions_are_neither_true_nor_false():
+    # a label found at 0.8; above it two detections of the same class inside one ignore
+    # region (a partly visible object): a small one wholly inside it (IoU with the region
+    # 0.25, share inside 1) and one that is the region
+    ignores = [np.array([[40, 40, 60, 60, 0.0]])]
+    preds = [np.array([det([40, 40, 50, 50], 0.95), det([40, 40, 60, 60], 0.9),
+                       det([0, 0, 10, 10], 0.8)])]
+    assert coco_map(preds, [GT], ignores)['map50_95'] == pytest.approx(1.0)
+    # counted as false positives without the region: precision 1/3 at full recall
+    assert coco_map(preds, [GT])['map50'] == pytest.approx(1 / 3)
+
+
+def test_ignore_regions_excuse_only_their_class_and_enough_overlap():
+    ignores = [np.array([[40, 40, 60, 60, 1.0]])]
+    other_class = [np.array([det([40, 40, 60, 60], 0.9), det([0, 0, 10, 10], 0.8)])]
+    assert coco_map(other_class, [GT], ignores)['map50'] == pytest.approx(0.5)
+    # 40 % of this detection lies inside the region: below 0.5, a false positive
+    ignores = [np.array([[40, 40, 60, 60, 0.0]])]
+    half_out = [np.array([det([52, 40, 72, 60], 0.9), det([0, 0, 10, 10], 0.8)])]
+    assert coco_map(half_out, [GT], ignores)['map50'] == pytest.approx(0.5)
+
+
+def test_a_label_wins_over_an_ignore_region():
+    # the detection overlaps the label at IoU 0.64 and lies wholly inside the region: it is
+    # the label's true positive, so a second detection of the region stays ignored
+    ignores = [np.array([[0, 0, 20, 20, 0.0]])]
+    preds = [np.array([det([0, 0, 10, 6.4], 0.9), det([0, 0, 20, 20], 0.8)])]
+    res = coco_map(preds, [GT], ignores)
+    assert res['map50'] == pytest.approx(1.0)
+    assert res['map50_95'] == pytest.approx(0.3)    # IoU 0.64 with the label
+
+
 def random_set(seed, n_img=12):
     rng = np.random.default_rng(seed)
     preds, gts = [], []
@@ -110,12 +142,25 @@ def random_set(seed, n_img=12):
     return preds, gts
 
 
-@pytest.mark.parametrize('seed', range(3))
-def test_agrees_with_pycocotools(seed):
+def random_ignores(seed, preds):
+    """Ignore regions around some of the unmatched detections, a little larger or shifted."""
+    rng = np.random.default_rng(seed + 100)
+    out = []
+    for p in preds:
+        pick = p[rng.random(len(p)) < 0.4]
+        grow = rng.uniform(-6, 10, (len(pick), 4)) * [-1, -1, 1, 1]
+        out.append(np.concatenate([pick[:, :4] + grow, pick[:, 5:]], 1))
+    return out
+
+
+@pytest.mark.parametrize('seed, with_ignores', [(0, False), (1, False), (2, False),
+                                                (3, True), (4, True), (5, True)])
+def test_agrees_with_pycocotools(seed, with_ignores):
     pytest.importorskip('pycocotools')
     preds, gts = random_set(seed)
-    ours = coco_map(preds, gts)
-    ref = mean_ap(preds, gts)
+    ignores = random_ignores(seed, preds) if with_ignores else None
+    ours = coco_map(preds, gts, ignores)
+    ref = mean_ap(preds, gts, ignores)
     assert ref['backend'] == 'pycocotools'
     assert ours['map50'] == pytest.approx(ref['map50'], abs=1e-9)
     assert ours['map50_95'] == pytest.approx(ref['map50_95'], abs=1e-9)

@@ -64,8 +64,12 @@ def box_area(b):
     return (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
 
 
-def box_iou(a, b):
-    """Pairwise IoU of xyxy boxes: (N, 4) x (M, 4) -> (N, M); numpy or torch."""
+def box_iou(a, b, crowd=None):
+    """Pairwise IoU of xyxy boxes: (N, 4) x (M, 4) -> (N, M); numpy or torch.
+
+    ``crowd``: optional (M,) bool; for those columns the union is a's area alone
+    (COCO's iscrowd overlap: the share of box a inside region b).
+    """
     lib = torch if isinstance(a, torch.Tensor) else np
     area_a, area_b = box_area(a), box_area(b)
     lt = lib.maximum(a[:, None, :2], b[None, :, :2])
@@ -73,6 +77,8 @@ def box_iou(a, b):
     wh = (rb - lt).clip(0) if lib is np else (rb - lt).clamp(min=0)
     inter = wh[..., 0] * wh[..., 1]
     union = area_a[:, None] + area_b[None, :] - inter
+    if crowd is not None:
+        union = lib.where(crowd[None, :], area_a[:, None], union)
     return inter / (union + 1e-12)
 
 

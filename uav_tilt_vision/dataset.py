@@ -7,7 +7,10 @@ Each world (wall, ground, 1-5 inspection objects, plain distractor panels) is bu
 exposure, blur and sensor noise are drawn per image. In ``VEHICLE_PROB`` of the images the
 camera is the vehicle's own eye-in-hand camera, so its tool (rod and tip) is in view as in
 flight, in front of the target at contact. Boxes are the tight bounds of each object's
-pixels in the simulator's segmentation, so occlusion and truncation are exact.
+pixels in the simulator's segmentation, so occlusion and truncation are exact. An object
+in view but less visible than the labelling rule asks (``MIN_VISIBLE_PX``,
+``MIN_VISIBLE_FRACTION``) is written to ``ignore/`` instead of ``labels/``: a region where
+a detection is neither right nor wrong (COCO's crowd regions, KITTI's "don't care").
 
 Splits (``SPLITS``): ``train`` and ``heldout`` draw from disjoint RNG streams (object,
 wall and ground textures never repeat), disjoint wall texture families and disjoint
@@ -198,17 +201,20 @@ def projected_area(centre_map, R_map_wall, eye, R_map_cam, cam):
 
 
 def labels_from_segmentation(seg, info, eye, R_map_cam, cam):
-    """YOLO rows [class, cx, cy, w, h] (normalised) for the sufficiently visible objects."""
-    rows = []
+    """YOLO rows [class, cx, cy, w, h] (normalised) of the objects in view, as two lists:
+    the sufficiently visible ones (labels) and the rest (regions evaluation ignores)."""
+    rows, ignore = [], []
     for obj in info.objects:
         ys, xs = np.nonzero(seg == obj.body)
-        full = projected_area(obj.centre_map, info.R_map_wall, eye, R_map_cam, cam)
-        if len(xs) < MIN_VISIBLE_PX or len(xs) < MIN_VISIBLE_FRACTION * full:
+        if len(xs) == 0:
             continue
+        full = projected_area(obj.centre_map, info.R_map_wall, eye, R_map_cam, cam)
         x1, x2, y1, y2 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
-        rows.append([CLASSES.index(obj.cls), (x1 + x2) / 2 / cam.width,
-                     (y1 + y2) / 2 / cam.height, (x2 - x1) / cam.width, (y2 - y1) / cam.height])
-    return rows
+        row = [CLASSES.index(obj.cls), (x1 + x2) / 2 / cam.width,
+               (y1 + y2) / 2 / cam.height, (x2 - x1) / cam.width, (y2 - y1) / cam.height]
+        visible = len(xs) >= MIN_VISIBLE_PX and len(xs) >= MIN_VISIBLE_FRACTION * full
+        (rows if visible else ignore).append(row)
+    return rows, ignore
 
 
 def render_world(job):
@@ -230,16 +236,20 @@ def render_world(job):
             rgb, _, seg = render(client, cam, eye, R_cam, light, segmentation=True)
             for body in extra:
                 p.removeBody(body, physicsClientId=client)
-            rows = labels_from_segmentation(seg, info, eye, R_cam, cam)
+            rows, ignore = labels_from_segmentation(seg, info, eye, R_cam, cam)
             cv2.imwrite(str(Path(out) / 'images' / f'{k:06d}.png'),
                         cv2.cvtColor(photometric(rgb, rng), cv2.COLOR_RGB2BGR))
-            (Path(out) / 'labels' / f'{k:06d}.txt').write_text(
-                ''.join(f'{int(r[0])} ' + ' '.join(f'{v:.6f}' for v in r[1:]) + '\n'
-                        for r in rows))
+            for folder, folder_rows in (('labels', rows), ('ignore', ignore)):
+                (Path(out) / folder / f'{k:06d}.txt').write_text(label_text(folder_rows))
             classes.extend(int(r[0]) for r in rows)
         return classes
     finally:
         p.disconnect(client)
+
+
+def label_text(rows):
+    """YOLO label file text for rows [class, cx, cy, w, h]."""
+    return ''.join(f'{int(r[0])} ' + ' '.join(f'{v:.6f}' for v in r[1:]) + '\n' for r in rows)
 
 
 def generate(out, n, seed=0, split='train', jobs=1, show_progress=True):
@@ -248,7 +258,8 @@ def generate(out, n, seed=0, split='train', jobs=1, show_progress=True):
         raise ValueError(f'unknown split {split!r}; expected one of {tuple(SPLITS)}')
     out = Path(out)
     (out / 'images').mkdir(parents=True, exist_ok=True)
-    (out / 'labels').mkdir(parents=True, exist_ok=True)
+    for folder in ('labels', 'ignore'):
+        (out / folder).mkdir(parents=True, exist_ok=True)
     worlds = [(str(out), seed, split, w, range(w * IMAGES_PER_WORLD,
                                                min((w + 1) * IMAGES_PER_WORLD, n)))
               for w in range(-(-n // IMAGES_PER_WORLD))]

@@ -10,7 +10,11 @@ that have ground truth. Both also give AP@0.5 per class and by COCO's object-are
 and so are the detections matched to it or, unmatched, outside the range themselves.
 
 Inputs: ``preds`` one (N, 6) array [x1, y1, x2, y2, score, class] per image, ``gts``
-one (M, 5) array [x1, y1, x2, y2, class] per image, in the same pixel frame.
+one (M, 5) array [x1, y1, x2, y2, class] per image, in the same pixel frame; optionally
+``ignores``, one (K, 5) array of the same kind per image: regions whose objects are in view
+but not labelled (too little of them visible). They are COCO's crowd regions: never counted,
+and a detection of their class that matches no label but lies inside one at the IoU
+threshold (overlap measured as the share of the detection inside the region) is ignored.
 """
 
 import contextlib
@@ -27,31 +31,39 @@ AREA_RANGES = {'small': (0.0, 32.0 ** 2), 'medium': (32.0 ** 2, 96.0 ** 2),
                'large': (96.0 ** 2, 1e10)}   # px^2, COCO's, bounds inclusive as in COCOeval
 
 
-def mean_ap(preds, gts):
+def mean_ap(preds, gts, ignores=None):
     """``coco_map``'s result plus 'backend', with pycocotools if available."""
     try:
         import pycocotools  # noqa: F401
     except ImportError:
-        return {**coco_map(preds, gts), 'backend': 'uav_tilt_vision.metrics.coco_map'}
-    return {**pycocotools_map(preds, gts), 'backend': 'pycocotools'}
+        return {**coco_map(preds, gts, ignores), 'backend': 'uav_tilt_vision.metrics.coco_map'}
+    return {**pycocotools_map(preds, gts, ignores), 'backend': 'pycocotools'}
 
 
-def coco_map(preds, gts):
+def as_rows(arrays, n, width):
+    """Per-image float arrays reshaped to (-1, width); ``n`` empty ones for None."""
+    if arrays is None:
+        return [np.zeros((0, width))] * n
+    return [np.asarray(a, dtype=np.float64).reshape(-1, width) for a in arrays]
+
+
+def coco_map(preds, gts, ignores=None):
     """COCO bbox mAP (101-point interpolated AP).
 
     {'map50', 'map50_95', 'ap50_per_class': {class id: AP@0.5}, 'map50_by_area': {range:
     mAP@0.5}}; nan (None for a range) where there is no ground truth to average over.
     """
-    preds = [np.asarray(p, dtype=np.float64).reshape(-1, 6) for p in preds]
-    gts = [np.asarray(g, dtype=np.float64).reshape(-1, 5) for g in gts]
+    preds, gts = as_rows(preds, 0, 6), as_rows(gts, 0, 5)
+    ignores = as_rows(ignores, len(gts), 5)
     classes = np.unique(np.concatenate([g[:, 4] for g in gts])).astype(int)
     if len(classes) == 0:
         return {'map50': float('nan'), 'map50_95': float('nan'), 'ap50_per_class': {},
                 'map50_by_area': dict.fromkeys(AREA_RANGES)}
-    ap = np.array([class_ap(preds, gts, c) for c in classes])  # (classes, thresholds)
+    ap = np.array([class_ap(preds, gts, ignores, c) for c in classes])  # (classes, thresholds)
     by_area = {}
     for name, rng in AREA_RANGES.items():
-        ap50 = [a[0] for a in (class_ap(preds, gts, c, rng) for c in classes) if a is not None]
+        ap50 = [a[0] for a in (class_ap(preds, gts, ignores, c, rng) for c in classes)
+                if a is not None]
         by_area[name] = float(np.mean(ap50)) if ap50 else None
     return {'map50': float(ap[:, 0].mean()), 'map50_95': float(ap.mean()),
             'ap50_per_class': {int(c): float(a) for c, a in zip(classes, ap[:, 0])},
@@ -64,20 +76,22 @@ def outside(boxes, area_rng):
     return (area < area_rng[0]) | (area > area_rng[1])
 
 
-def class_ap(preds, gts, cls, area_rng=(0.0, np.inf)):
+def class_ap(preds, gts, ignores, cls, area_rng=(0.0, np.inf)):
     """AP of one class at every IoU threshold, shape (len(IOU_THRESHOLDS),).
 
     Only ground truth whose area is in ``area_rng`` counts; None when there is none.
     """
     scores, matched, ignored = [], [], []
     n_gt = 0
-    for p, g in zip(preds, gts):
+    for p, g, ig in zip(preds, gts, ignores):
         p = p[p[:, 5] == cls]
         p = p[np.argsort(-p[:, 4], kind='mergesort')][:MAX_DETS]
-        g = g[g[:, 4] == cls]
+        g, ig = g[g[:, 4] == cls], ig[ig[:, 4] == cls]
         g_ignored = outside(g[:, :4], area_rng)
         n_gt += int((~g_ignored).sum())
-        tp, d_ignored = match(p[:, :4], g[:, :4], g_ignored)
+        crowd = np.r_[np.zeros(len(g), bool), np.ones(len(ig), bool)]
+        tp, d_ignored = match(p[:, :4], np.r_[g[:, :4], ig[:, :4]],
+                              np.r_[g_ignored, crowd[len(g):]], crowd)
         scores.append(p[:, 4])
         matched.append(tp)
         ignored.append(d_ignored | (~tp & outside(p[:, :4], area_rng)))
@@ -89,9 +103,11 @@ def class_ap(preds, gts, cls, area_rng=(0.0, np.inf)):
     return np.array([interpolated_ap(t[~i], n_gt) for t, i in zip(tp, ignored)])
 
 
-def match(det, gt, gt_ignored):
+def match(det, gt, gt_ignored, crowd=None):
     """Greedy COCO matching of score-sorted detections to ground truth.
 
+    ``gt_ignored`` and ``crowd`` are (M,) bool; a crowd region is ignored, overlaps as the
+    share of the detection inside it, and may match any number of detections.
     Returns (matched, ignored), each (thresholds, n_det) bool: the detection matched a
     ground truth at IoU >= t, and that ground truth was an ignored one.
     """
@@ -99,7 +115,8 @@ def match(det, gt, gt_ignored):
     ignored = np.zeros_like(tp)
     if len(det) == 0 or len(gt) == 0:
         return tp, ignored
-    iou = box_iou(det, gt)
+    crowd = np.zeros(len(gt), bool) if crowd is None else crowd
+    iou = box_iou(det, gt, crowd)
     for ti, t in enumerate(IOU_THRESHOLDS):
         taken = np.zeros(len(gt), dtype=bool)
         for d in range(len(det)):
@@ -110,7 +127,8 @@ def match(det, gt, gt_ignored):
             thr = min(t, 1 - 1e-10)
             g = int(counted.argmax()) if counted.max() >= thr else int(cand.argmax())
             if cand[g] >= thr:
-                taken[g] = tp[ti, d] = True
+                taken[g] = not crowd[g]
+                tp[ti, d] = True
                 ignored[ti, d] = gt_ignored[g]
     return tp, ignored
 
@@ -129,24 +147,27 @@ def interpolated_ap(tp, n_gt):
     return float(sampled.mean())
 
 
-def pycocotools_map(preds, gts):
+def pycocotools_map(preds, gts, ignores=None):
     """The same metrics computed by pycocotools' COCOeval (its default area ranges)."""
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
 
-    classes = sorted({int(c) for g in gts for c in np.asarray(g).reshape(-1, 5)[:, 4]})
+    preds, gts = as_rows(preds, 0, 6), as_rows(gts, 0, 5)
+    ignores = as_rows(ignores, len(gts), 5)
+    classes = sorted({int(c) for g in gts for c in g[:, 4]})
     anns, dets = [], []
-    for i, (p, g) in enumerate(zip(preds, gts)):
-        for x1, y1, x2, y2, c in np.asarray(g, dtype=float).reshape(-1, 5):
-            anns.append({'id': len(anns) + 1, 'image_id': i, 'category_id': int(c),
-                         'bbox': [x1, y1, x2 - x1, y2 - y1], 'area': (x2 - x1) * (y2 - y1),
-                         'iscrowd': 0})
-        for x1, y1, x2, y2, s, c in np.asarray(p, dtype=float).reshape(-1, 6):
+    for i, (p, g, ig) in enumerate(zip(preds, gts, ignores)):
+        for rows, crowd in ((g, 0), (ig, 1)):
+            for x1, y1, x2, y2, c in rows:
+                anns.append({'id': len(anns) + 1, 'image_id': i, 'category_id': int(c),
+                             'bbox': [x1, y1, x2 - x1, y2 - y1],
+                             'area': (x2 - x1) * (y2 - y1), 'iscrowd': crowd})
+        for x1, y1, x2, y2, s, c in p:
             dets.append({'image_id': i, 'category_id': int(c),
                          'bbox': [x1, y1, x2 - x1, y2 - y1], 'score': s})
     if not classes or not dets:
         # COCOeval cannot load an empty result list; coco_map gives the same numbers
-        return coco_map(preds, gts)
+        return coco_map(preds, gts, ignores)
     with contextlib.redirect_stdout(io.StringIO()):  # COCO prints progress and a table
         gt = COCO()
         gt.dataset = {'images': [{'id': i} for i in range(len(gts))], 'annotations': anns,

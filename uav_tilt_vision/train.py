@@ -193,17 +193,22 @@ def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
     """COCO-style mAP of ``model`` on a YOLO-format set (``metrics.mean_ap``).
 
     AP@0.5 per class is keyed by the class names of the set's meta.json where it has them.
+    The set's ignore regions (objects in view but too little visible to label) are COCO's
+    crowd regions: detections on them are neither true nor false positives; the result
+    counts them in 'ignore_regions'.
 
     ``model``: a ``Detector`` or any object whose ``predict(images, conf_thres, iou_thres)``
     maps a list of uint8 RGB images to one (N, 6) array each (``backends``).
     """
     ds = YoloDataset(data_dir)
-    preds, gts = [], []
+    preds, gts, ignores = [], [], []
     for start in progress(range(0, len(ds), batch), desc='eval', unit='batch'):
         images = [ds.read_rgb(i) for i in range(start, min(start + batch, len(ds)))]
         preds.extend(model.predict(images, conf_thres, iou_thres))
-        gts.extend(ds.ground_truth(start + k, img.shape) for k, img in enumerate(images))
-    res = mean_ap(preds, gts)
+        for k, img in enumerate(images):
+            gts.append(ds.ground_truth(start + k, img.shape))
+            ignores.append(ds.ground_truth(start + k, img.shape, 'ignore'))
+    res = {**mean_ap(preds, gts, ignores), 'ignore_regions': sum(len(i) for i in ignores)}
     names = read_meta(data_dir).get('classes')
     if names:
         res['ap50_per_class'] = {names[c]: ap for c, ap in res['ap50_per_class'].items()}

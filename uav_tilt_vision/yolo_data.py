@@ -1,7 +1,9 @@
 """YOLO-format data set reader, light augmentation, collate and k-means anchors.
 
 Layout: ``DIR/images/<name>.png`` and ``DIR/labels/<name>.txt`` with one
-``class cx cy w h`` line per object (normalised to the image size); an optional
+``class cx cy w h`` line per object (normalised to the image size); optional
+``DIR/ignore/<name>.txt`` in the same format give the regions of objects in view but too
+little visible to label, which evaluation ignores (COCO's crowd regions); an optional
 ``DIR/meta.json`` may give ``seed`` and ``classes`` (list of names).
 """
 
@@ -80,14 +82,16 @@ class YoloDataset(torch.utils.data.Dataset):
         """Original image i as uint8 RGB."""
         return cv2.cvtColor(cv2.imread(str(self.images[i]), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
-    def labels(self, i):
-        """Normalised labels of image i, (n, 5) [class, cx, cy, w, h]."""
-        return read_labels(self.root / 'labels' / (self.images[i].stem + '.txt'))
+    def labels(self, i, folder='labels'):
+        """Normalised labels of image i, (n, 5) [class, cx, cy, w, h]; ``folder='ignore'``
+        gives its ignore regions instead."""
+        return read_labels(self.root / folder / (self.images[i].stem + '.txt'))
 
-    def ground_truth(self, i, shape):
-        """(n, 5) [x1, y1, x2, y2, class] in pixels of image i, whose (H, W, ...) is ``shape``."""
+    def ground_truth(self, i, shape, folder='labels'):
+        """(n, 5) [x1, y1, x2, y2, class] in pixels of image i, whose (H, W, ...) is ``shape``;
+        ``folder='ignore'`` gives its ignore regions instead."""
         h, w = shape[:2]
-        lab = self.labels(i)
+        lab = self.labels(i, folder)
         xyxy = xywh_to_xyxy(lab[:, 1:] * [w, h, w, h])
         return np.concatenate([xyxy, lab[:, :1]], 1)
 
