@@ -9,7 +9,8 @@ import pytest
 from uav_tilt_sim.camera import CameraConfig, render
 from uav_tilt_sim.textures import OBJECT_CLASSES, OBJECT_SIZE_M
 from uav_tilt_vision import dataset, vision_cli
-from uav_tilt_vision.yolo_data import YoloDataset, random_crop, read_labels
+from uav_tilt_vision.yolo_data import (IGNORE_CLASS, YoloDataset, random_crop,
+                                       read_labels)
 
 
 @pytest.fixture(scope='module')
@@ -142,15 +143,22 @@ def test_unknown_split_is_refused(tmp_path):
 
 def test_random_crop_keeps_an_object_and_clips_boxes():
     img = np.arange(256 * 320 * 3, dtype=np.uint32).reshape(256, 320, 3).astype(np.uint8)
-    lab = np.array([[1, 100.0, 100.0, 40, 40], [2, 300.0, 240.0, 30, 30]])
+    lab = np.array([[1, 100.0, 100.0, 60, 60], [2, 220.0, 150.0, 80, 80],
+                    [IGNORE_CLASS, 20.0, 20.0, 10, 10]])
+    n_cut = 0
     for seed in range(20):
         out, kept = random_crop(img, lab, (192, 160), np.random.default_rng(seed))
-        assert out.shape == (160, 192, 3) and len(kept) >= 1
+        labelled, cut = kept[kept[:, 0] != IGNORE_CLASS], kept[kept[:, 0] == IGNORE_CLASS]
+        assert out.shape == (160, 192, 3) and len(labelled) >= 1
         x1y1, x2y2 = kept[:, 1:3] - kept[:, 3:] / 2, kept[:, 1:3] + kept[:, 3:] / 2
         assert np.all(x1y1 >= 0) and np.all(x2y2 <= [192, 160])
-        # every kept box keeps at least 40 % of its area
-        full = np.where(kept[:, 0] == 1, 1600.0, 900.0)
-        assert np.all(kept[:, 3] * kept[:, 4] >= 0.4 * full - 1e-6)
+        assert np.all(kept[:, 3] * kept[:, 4] > 0)
+        # every box still labelled keeps at least 40 % of its area
+        full = np.where(labelled[:, 0] == 1, 3600.0, 6400.0)
+        assert np.all(labelled[:, 3] * labelled[:, 4] >= 0.4 * full - 1e-6)
+        # a label cut further is not dropped but becomes an ignore region
+        n_cut += int(np.sum(cut[:, 3] * cut[:, 4] > 100))
+    assert n_cut >= 1
 
 
 def test_cli_dataset_prints_json(tmp_path, capsys):

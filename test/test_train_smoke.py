@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 import torch
 
-from uav_tilt_vision.detector import load_model
+from uav_tilt_vision.detector import DEFAULT_ANCHORS, STRIDES, load_model
 from uav_tilt_vision.train import card_path, evaluate, train
-from uav_tilt_vision.yolo_data import YoloDataset, collate, kmeans_anchors, read_labels
-from uav_tilt_vision.yolo_loss import assign, ciou, distill_loss
+from uav_tilt_vision.yolo_data import (IGNORE_CLASS, YoloDataset, collate, kmeans_anchors,
+                                       read_labels)
+from uav_tilt_vision.yolo_loss import YoloLoss, assign, ciou, distill_loss, ignored_cells
 
 torch.set_num_threads(2)
 
@@ -112,6 +113,72 @@ def test_assign_best_anchor_and_threshold():
     assert mask[0].tolist() == [[False, True, True], [False, False, False]]
     # a box unlike every anchor still gets its best one (40x60: IoU 540 / 5460)
     assert mask[1].tolist() == [[False, False, True], [False, False, False]]
+
+
+def test_ignore_regions_follow_the_labels_as_targets(tmp_path):
+    data = make_dataset(tmp_path / 'data', 2, seed=5)
+    (data / 'ignore').mkdir()
+    (data / 'ignore' / '000.txt').write_text('2 0.5 0.5 0.1 0.2\n')
+    ds = YoloDataset(data)
+    _, t = ds[0]
+    n = len(ds.labels(0))
+    assert t[:n, 1].tolist() == ds.labels(0)[:, 0].tolist()
+    # 320x240 letterboxed to 320x256: scale 1, 8 px band on top
+    np.testing.assert_allclose(t[n:].numpy(), [[0, IGNORE_CLASS, 160, 128, 32, 48]], atol=1e-4)
+    # only labels shape the anchors
+    assert len(ds.label_wh()) == len(ds.labels(0)) + len(ds.labels(1))
+
+
+def test_ignored_cells_cover_the_cells_that_could_predict_the_region():
+    regions = torch.tensor([[0, IGNORE_CLASS, 150, 60, 100, 40],    # x 100-200, y 40-80
+                            [1, IGNORE_CLASS, 50, 50, 6, 6]])       # inside cell (1, 1) at 32
+    for stride in STRIDES:
+        h, w = 256 // stride, 320 // stride
+        got = ignored_cells(regions, (2, h, w), stride)
+        cy, cx = np.meshgrid((np.arange(h) + 0.5) * stride, (np.arange(w) + 0.5) * stride,
+                             indexing='ij')
+        inside = [(abs(cx - x) <= bw / 2) & (abs(cy - y) <= bh / 2)
+                  for _, _, x, y, bw, bh in regions.tolist()]
+        for b, (_, _, x, y, _, _) in enumerate(regions.tolist()):
+            inside[b][int(y // stride), int(x // stride)] = True   # the centre's own cell
+        assert got.tolist() == [m.tolist() for m in inside]
+    assert ignored_cells(regions, (2, 8, 10), 32)[1].sum() == 1
+
+
+def test_loss_ignores_objectness_in_ignore_regions_but_not_on_labels():
+    torch.manual_seed(0)
+    anchors = torch.tensor(DEFAULT_ANCHORS[3])
+    loss = YoloLoss(anchors)
+    heads = [torch.randn(1, 3 * 8, 256 // s, 320 // s) for s in STRIDES]
+    label = torch.tensor([[0, 1, 60, 60, 30, 30.0]])
+    region = torch.tensor([[0, IGNORE_CLASS, 200, 150, 60, 40.0]])
+
+    def with_objectness(cells, logit):
+        """``heads`` with every anchor's objectness set to ``logit`` where ``cells(stride)``."""
+        out = []
+        for h, s in zip(heads, STRIDES):
+            h = h.clone().view(1, 3, 8, *h.shape[2:])
+            h[:, :, 4][:, :, cells(s)] = logit
+            out.append(h.view(1, 24, *h.shape[3:]))
+        return out
+
+    def cells_of(box):
+        def cells(s):
+            return ignored_cells(torch.tensor([[0, IGNORE_CLASS, *box]]),
+                                 (1, 256 // s, 320 // s), s)[0]
+        return cells
+
+    confident = with_objectness(cells_of([200, 150, 60, 40]), 8.0)
+    # a confident prediction inside the region costs nothing with it, a lot without it
+    assert loss(confident, torch.cat([label, region]))[0] == \
+        pytest.approx(float(loss(heads, torch.cat([label, region]))[0]), rel=1e-6)
+    assert loss(confident, label)[0] > loss(heads, label)[0] + 0.01
+    # a label inside a region is still learnt: its own cells keep their objectness loss
+    # (one or two cells of the ~5,000 averaged: a small but not a rounding-size change)
+    inner = torch.tensor([[0, 1, 200, 150, 30, 30.0]])
+    at_label = with_objectness(cells_of([200, 150, 1, 1]), -8.0)
+    assert loss(at_label, torch.cat([inner, region]))[0] > \
+        loss(heads, torch.cat([inner, region]))[0] + 1e-4
 
 
 def test_train_one_epoch_writes_loadable_model(data8, tmp_path):

@@ -18,6 +18,9 @@ from uav_tilt_vision.boxes import letterbox, wh_iou, xywh_to_xyxy, xyxy_to_xywh
 from uav_tilt_vision.detector import IMG_SIZE
 
 IMG_EXTS = ('.png', '.jpg', '.jpeg', '.bmp')
+# Class of the target rows that are ignore regions, not labels: the loss does not score
+# objectness there (``yolo_loss``).
+IGNORE_CLASS = -1
 # Hue, saturation and value jitter (fractions): the value range reaches well below the
 # rendered exposures, so that dimmer lighting than any seen in training stays familiar.
 HSV_GAINS = (0.015, 0.5, 0.5)
@@ -53,7 +56,8 @@ class YoloDataset(torch.utils.data.Dataset):
     """Letterboxed images and targets in input pixels.
 
     Items are ``(image (3, H, W) float in [0, 1], targets (n, 6))`` with targets
-    ``[0, class, cx, cy, w, h]``; ``collate`` fills column 0 with the batch index.
+    ``[0, class, cx, cy, w, h]``; ``collate`` fills column 0 with the batch index. The
+    image's ignore regions follow its labels as rows of class ``IGNORE_CLASS``.
     Augmentation draws from an RNG seeded by (seed, epoch, index), so results do not
     depend on worker processes. Enable ``hflip`` only for mirror-symmetric classes.
     ``crop`` (w, h), with ``augment``: train on a window around a random object
@@ -96,11 +100,14 @@ class YoloDataset(torch.utils.data.Dataset):
         return np.concatenate([xyxy, lab[:, :1]], 1)
 
     def load(self, i):
-        """Letterboxed uint8 RGB image and (n, 5) [class, cx, cy, w, h] in input pixels."""
+        """Letterboxed uint8 RGB image and (n, 5) [class, cx, cy, w, h] in input pixels: the
+        labels, then the ignore regions (class ``IGNORE_CLASS``)."""
         img = self.read_rgb(i)
         h, w = img.shape[:2]
         out, scale, pad = letterbox(img, self.img_size)
-        lab = self.labels(i)
+        ignore = self.labels(i, 'ignore')
+        ignore[:, 0] = IGNORE_CLASS
+        lab = np.concatenate([self.labels(i), ignore])
         boxes = lab[:, 1:] * [w, h, w, h] * scale + [pad[0], pad[1], 0, 0]
         return out, np.concatenate([lab[:, :1], boxes], 1)
 
@@ -123,19 +130,22 @@ class YoloDataset(torch.utils.data.Dataset):
 
     def label_wh(self):
         """All label sizes (n, 2) in input pixels (for anchor clustering)."""
-        return np.concatenate([self.load(i)[1][:, 3:5] for i in range(len(self))], 0)
+        labs = (self.load(i)[1] for i in range(len(self)))
+        return np.concatenate([lab[lab[:, 0] != IGNORE_CLASS, 3:5] for lab in labs], 0)
 
 
 def random_crop(img, lab, size, rng, min_kept=0.4):
     """A (w, h) window holding a random labelled object (anywhere, if none) and its labels.
 
-    Boxes are clipped to the window; one keeping less than ``min_kept`` of its area is
-    dropped (like the data set's visibility rule).
+    Boxes are clipped to the window; a label keeping less than ``min_kept`` of its area
+    becomes an ignore region (like the data set's visibility rule), and boxes left with no
+    area are dropped.
     """
     w, h = size
     H, W = img.shape[:2]
-    if len(lab):
-        cx, cy = lab[int(rng.integers(len(lab))), 1:3]
+    labelled = np.flatnonzero(lab[:, 0] != IGNORE_CLASS)
+    if len(labelled):
+        cx, cy = lab[labelled[int(rng.integers(len(labelled)))], 1:3]
         x0, y0 = rng.uniform([cx - w, cy - h], [cx, cy])
     else:
         x0, y0 = rng.uniform([0, 0], [W - w, H - h])
@@ -143,8 +153,9 @@ def random_crop(img, lab, size, rng, min_kept=0.4):
     xyxy = xywh_to_xyxy(lab[:, 1:]) - [x0, y0, x0, y0]
     clipped = np.clip(xyxy, 0, [w, h, w, h])
     area = np.prod(clipped[:, 2:] - clipped[:, :2], 1)
-    keep = area >= min_kept * lab[:, 3] * lab[:, 4]
-    out = np.concatenate([lab[keep, :1], xyxy_to_xywh(clipped[keep])], 1)
+    cls = np.where(area >= min_kept * lab[:, 3] * lab[:, 4], lab[:, 0], IGNORE_CLASS)
+    keep = area > 0
+    out = np.concatenate([cls[keep, None], xyxy_to_xywh(clipped[keep])], 1)
     return np.ascontiguousarray(img[y0:y0 + h, x0:x0 + w]), out
 
 

@@ -10,7 +10,11 @@ makes the score reflect localisation quality, useful for NMS and mAP.
 
 Target assignment: each ground truth box goes to the grid cell holding its centre
 for every anchor (over both scales) whose shape IoU with it exceeds ``anchor_iou``,
-and always to its single best anchor, as in YOLOv3.
+and always to its single best anchor, as in YOLOv3. Ignore regions (target rows of class
+``IGNORE_CLASS``: objects in view but too little visible to label) take no part in the
+assignment; the cells that could predict them, those whose centre lies inside one and the
+one holding its centre, are left out of the objectness loss unless a label is assigned to
+them, so that a partly visible object is neither taught as one nor as background.
 
 ``distill_loss`` adds what a teacher detector outputs as a second, soft target (used to
 fine-tune a pruned model against the unpruned one).
@@ -24,6 +28,7 @@ from torch import nn
 
 from uav_tilt_vision.boxes import cell_xywh, head_view, wh_iou, xywh_to_xyxy
 from uav_tilt_vision.detector import STRIDES
+from uav_tilt_vision.yolo_data import IGNORE_CLASS
 
 
 def ciou(a, b, eps=1e-9):
@@ -58,6 +63,20 @@ def assign(targets, anchors, anchor_iou):
     return mask.view(-1, s, a)
 
 
+def ignored_cells(regions, shape, stride):
+    """Bool (B, H, W) grid: cells that could predict one of the ``regions`` ((n, 6) target
+    rows [image, class, cx, cy, w, h], input pixels), whose centre lies inside one or that
+    holds its centre."""
+    out = torch.zeros(shape, dtype=torch.bool, device=regions.device)
+    for b, _, cx, cy, w, h in regions.tolist():
+        lo = [min(math.floor(c / stride), math.ceil((c - d / 2) / stride - 0.5))
+              for c, d in ((cx, w), (cy, h))]
+        hi = [max(math.floor(c / stride), math.floor((c + d / 2) / stride - 0.5))
+              for c, d in ((cx, w), (cy, h))]
+        out[int(b), max(lo[1], 0):hi[1] + 1, max(lo[0], 0):hi[0] + 1] = True
+    return out
+
+
 class YoloLoss(nn.Module):
     """Callable ``loss(heads, targets) -> (total, {'box', 'obj', 'cls'})``."""
 
@@ -74,11 +93,16 @@ class YoloLoss(nn.Module):
         """Total weighted loss and its detached components for one batch."""
         dev = heads[0].device
         targets = targets.to(dev)
+        regions = targets[targets[:, 1] == IGNORE_CLASS]
+        targets = targets[targets[:, 1] != IGNORE_CLASS]
         mask = assign(targets, self.anchors, self.anchor_iou)
         l_box = l_obj = l_cls = torch.zeros((), device=dev)
         for s, (head, stride) in enumerate(zip(heads, STRIDES)):
             p = head_view(head, self.anchors.shape[1])
             tobj = torch.zeros_like(p[..., 4])
+            # objectness weight: 0 on the cells of ignore regions, 1 elsewhere and on positives
+            wobj = (~ignored_cells(regions, (p.shape[0],) + p.shape[2:4], stride))[:, None]
+            wobj = wobj.expand_as(tobj).to(tobj.dtype).clone()
             ti, ai = mask[:, s].nonzero(as_tuple=True)
             if len(ti):
                 t = targets[ti]
@@ -91,10 +115,12 @@ class YoloLoss(nn.Module):
                 iou = ciou(torch.cat([xy, wh], 1), t[:, 2:6])
                 l_box = l_box + (1 - iou).mean()
                 tobj[b, ai, gy, gx] = iou.detach().clamp(0).to(tobj.dtype)
+                wobj[b, ai, gy, gx] = 1.0
                 tcls = torch.zeros_like(ps[:, 5:])
                 tcls[torch.arange(len(t)), t[:, 1].long()] = 1.0
                 l_cls = l_cls + self.bce(ps[:, 5:], tcls)
-            l_obj = l_obj + self.balance[s] * self.bce(p[..., 4], tobj)
+            bce = F.binary_cross_entropy_with_logits(p[..., 4], tobj, wobj, reduction='sum')
+            l_obj = l_obj + self.balance[s] * bce / wobj.sum().clamp(min=1.0)
         gb, go, gc = self.gains
         total = gb * l_box + go * l_obj + gc * l_cls
         parts = {'box': l_box, 'obj': l_obj, 'cls': l_cls}
