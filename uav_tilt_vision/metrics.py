@@ -40,7 +40,7 @@ def mean_ap(preds, gts, ignores=None):
     return {**pycocotools_map(preds, gts, ignores), 'backend': 'pycocotools'}
 
 
-def as_rows(arrays, n, width):
+def as_rows(arrays, width, n=0):
     """Per-image float arrays reshaped to (-1, width); ``n`` empty ones for None."""
     if arrays is None:
         return [np.zeros((0, width))] * n
@@ -53,8 +53,8 @@ def coco_map(preds, gts, ignores=None):
     {'map50', 'map50_95', 'ap50_per_class': {class id: AP@0.5}, 'map50_by_area': {range:
     mAP@0.5}}; nan (None for a range) where there is no ground truth to average over.
     """
-    preds, gts = as_rows(preds, 0, 6), as_rows(gts, 0, 5)
-    ignores = as_rows(ignores, len(gts), 5)
+    preds, gts = as_rows(preds, 6), as_rows(gts, 5)
+    ignores = as_rows(ignores, 5, len(gts))
     classes = np.unique(np.concatenate([g[:, 4] for g in gts])).astype(int)
     if len(classes) == 0:
         return {'map50': float('nan'), 'map50_95': float('nan'), 'ap50_per_class': {},
@@ -91,7 +91,7 @@ def class_ap(preds, gts, ignores, cls, area_rng=(0.0, np.inf)):
         n_gt += int((~g_ignored).sum())
         crowd = np.r_[np.zeros(len(g), bool), np.ones(len(ig), bool)]
         tp, d_ignored = match(p[:, :4], np.r_[g[:, :4], ig[:, :4]],
-                              np.r_[g_ignored, crowd[len(g):]], crowd)
+                              np.r_[g_ignored, np.ones(len(ig), bool)], crowd)
         scores.append(p[:, 4])
         matched.append(tp)
         ignored.append(d_ignored | (~tp & outside(p[:, :4], area_rng)))
@@ -152,8 +152,8 @@ def pycocotools_map(preds, gts, ignores=None):
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
 
-    preds, gts = as_rows(preds, 0, 6), as_rows(gts, 0, 5)
-    ignores = as_rows(ignores, len(gts), 5)
+    preds, gts = as_rows(preds, 6), as_rows(gts, 5)
+    ignores = as_rows(ignores, 5, len(gts))
     classes = sorted({int(c) for g in gts for c in g[:, 4]})
     anns, dets = [], []
     for i, (p, g, ig) in enumerate(zip(preds, gts, ignores)):
