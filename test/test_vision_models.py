@@ -49,7 +49,7 @@ def fp32_map(heldout):
 MAP50_GOAL = 0.95
 
 
-def test_fp32_map50_on_heldout_reaches_the_goal(heldout, fp32_map):
+def test_fp32_map50_on_heldout_reaches_the_goal(fp32_map):
     assert fp32_map['ignore_regions'] > 0 and fp32_map['backend'] == 'pycocotools'
     assert fp32_map['map50'] >= MAP50_GOAL
 

@@ -103,7 +103,7 @@ def class_ap(preds, gts, ignores, cls, area_rng=(0.0, np.inf)):
     return np.array([interpolated_ap(t[~i], n_gt) for t, i in zip(tp, ignored)])
 
 
-def match(det, gt, gt_ignored, crowd=None):
+def match(det, gt, gt_ignored, crowd):
     """Greedy COCO matching of score-sorted detections to ground truth.
 
     ``gt_ignored`` and ``crowd`` are (M,) bool; a crowd region is ignored, overlaps as the
@@ -115,7 +115,6 @@ def match(det, gt, gt_ignored, crowd=None):
     ignored = np.zeros_like(tp)
     if len(det) == 0 or len(gt) == 0:
         return tp, ignored
-    crowd = np.zeros(len(gt), bool) if crowd is None else crowd
     iou = box_iou(det, gt, crowd)
     for ti, t in enumerate(IOU_THRESHOLDS):
         taken = np.zeros(len(gt), dtype=bool)
