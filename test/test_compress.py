@@ -41,7 +41,7 @@ def images_dir(tmp_path_factory):
     return root
 
 
-@pytest.mark.parametrize('scales', [2, 3])
+@pytest.mark.parametrize('scales', [2, 3, 4])
 def test_pruning_shrinks_and_round_trips(tmp_path, scales, half_rounded):
     model = trained_like(scales=scales)
     before = compress.size_stats(model)
@@ -50,7 +50,8 @@ def test_pruning_shrinks_and_round_trips(tmp_path, scales, half_rounded):
     assert after['params'] < 0.35 * before['params'] and after['macs'] < 0.7 * before['macs']
     x = torch.rand(2, 3, 256, 320)
     heads = half_rounded(model)(x)     # the weights save_model stores
-    assert [h.shape for h in heads] == [(2, 24, 8, 10), (2, 24, 16, 20), (2, 24, 32, 40)][:scales]
+    assert [h.shape for h in heads] == [(2, 24, 8, 10), (2, 24, 16, 20), (2, 24, 32, 40),
+                                        (2, 24, 64, 80)][:scales]
     save_model(tmp_path / 'p.pt', model)
     reloaded = load_model(tmp_path / 'p.pt')
     assert reloaded.channels() == model.channels() != Detector(3, 0.25, scales=scales).channels()
@@ -58,7 +59,7 @@ def test_pruning_shrinks_and_round_trips(tmp_path, scales, half_rounded):
         torch.testing.assert_close(a, b)
 
 
-@pytest.mark.parametrize('scales', [2, 3])
+@pytest.mark.parametrize('scales', [2, 3, 4])
 def test_onnx_export_matches_torch_and_int8_stays_close(tmp_path, images_dir, scales):
     model = trained_like(1, scales)
     fp32, int8 = tmp_path / 'm.onnx', tmp_path / 'm_int8.onnx'

@@ -6,7 +6,8 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from uav_tilt_sim.camera import CameraConfig, render
+from uav_tilt_sim.camera import CameraConfig, Lighting, make_renderer
+from uav_tilt_sim.visuals import Scene
 from uav_tilt_sim.textures import OBJECT_CLASSES, OBJECT_SIZE_M
 from uav_tilt_vision import dataset, vision_cli
 from uav_tilt_vision.yolo_data import (IGNORE_CLASS, YoloDataset, random_crop,
@@ -57,19 +58,23 @@ def test_splits_are_disjoint():
 def views():
     """(info, seg, eye, R_cam) of 24 training-split views: 4 in each of 6 worlds."""
     cam = CameraConfig()
+    renderer = make_renderer(cam)
     client = p.connect(p.DIRECT)
+    scene = Scene(client)
     out = []
     try:
         for world in range(6):
             rng = np.random.default_rng([11, world])
-            info = dataset.build_random_world(client, rng, dataset.SPLITS['train'])
+            info = dataset.build_random_world(scene, rng, dataset.SPLITS['train'])
             for _ in range(4):
                 eye, R_cam = dataset.camera_pose(rng, info, cam)
-                _, _, seg = render(client, cam, eye, R_cam, segmentation=True)
+                _, _, seg = renderer.render(scene, eye, R_cam, Lighting(), segmentation=True)
                 out.append((info, seg, eye, R_cam))
             p.resetSimulation(physicsClientId=client)
+            scene.clear()
     finally:
         p.disconnect(client)
+        renderer.close()
     return out
 
 

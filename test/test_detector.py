@@ -17,14 +17,14 @@ torch.set_num_threads(2)
 INPUT = (1, 3, 256, 320)
 
 
-@pytest.mark.parametrize('scales', [2, 3])
+@pytest.mark.parametrize('scales', [2, 3, 4])
 def test_head_shapes_for_camera_input(scales):
     model = Detector(num_classes=3, width_mult=0.25, scales=scales)
     heads = model(torch.zeros(2, 3, 256, 320))
-    # 3 anchors * (5 + 3 classes) = 24 channels; grids 320/s x 256/s for s = 32, 16 (, 8)
-    expect = [(2, 24, 8, 10), (2, 24, 16, 20), (2, 24, 32, 40)][:scales]
+    # 3 anchors * (5 + 3 classes) = 24 channels; grids 320/s x 256/s for s = 32, 16 (, 8, 4)
+    expect = [(2, 24, 8, 10), (2, 24, 16, 20), (2, 24, 32, 40), (2, 24, 64, 80)][:scales]
     assert [tuple(h.shape) for h in heads] == expect
-    assert model.strides == (32, 16, 8)[:scales] and len(model.heads) == scales
+    assert model.strides == (32, 16, 8, 4)[:scales] and len(model.heads) == scales
 
 
 def test_reference_yolov3_tiny_architecture():
@@ -37,6 +37,11 @@ def test_reference_yolov3_tiny_architecture():
     assert three.channels() == list(REF_CHANNELS) + [128, 128]
     extra = 256 * 128 + 256 * 128 * 9 + 128 * 255 + 255 + 4 * 128
     assert sum(p.numel() for p in three.parameters()) == n + extra
+    # the stride-4 branch, built the same way on the stride-4 route (c2, 64 channels)
+    four = Detector(num_classes=80, width_mult=1.0, scales=4)
+    assert four.channels() == list(REF_CHANNELS) + [128, 128, 64, 64]
+    extra4 = 128 * 64 + (64 + 64) * 64 * 9 + 64 * 255 + 255 + 4 * 64
+    assert sum(p.numel() for p in four.parameters()) == n + extra + extra4
 
 
 def test_deployed_width_cuts_macs_at_least_4x():
@@ -51,15 +56,15 @@ def test_wrong_channel_list_or_scales_are_rejected():
     with pytest.raises(ValueError):
         Detector(3, channels=[8] * 11, scales=3)
     with pytest.raises(ValueError):
-        Detector(3, scales=4)
+        Detector(3, scales=5)
 
 
-@pytest.mark.parametrize('scales', [2, 3])
+@pytest.mark.parametrize('scales', [2, 3, 4])
 def test_save_load_round_trip_with_irregular_channels(tmp_path, scales, half_rounded):
     torch.manual_seed(0)
-    channels = [5, 11, 13, 29, 37, 45, 70, 21, 33, 9, 27, 12, 14][:7 + 2 * scales]
+    channels = [5, 11, 13, 29, 37, 45, 70, 21, 33, 9, 27, 12, 14, 7, 6][:7 + 2 * scales]
     anchors = [[[40, 30], [60, 70], [100, 90]], [[8, 9], [15, 20], [25, 27]],
-               [[4, 5], [6, 7], [8, 8]]][:scales]
+               [[4, 5], [6, 7], [8, 8]], [[2, 3], [3, 3], [4, 4]]][:scales]
     model = Detector(num_classes=2, channels=channels, anchors=anchors, img_size=(320, 256),
                      scales=scales)
     model.train()

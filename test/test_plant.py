@@ -15,7 +15,7 @@ def make_plant(start, drag=0.0, **scenario_changes):
     scenario.wind.drag_n_s2_per_m2 = drag
     for key, value in scenario_changes.items():
         setattr(scenario, key, value)
-    return Plant(PlantCoreConfig(), scenario, render=False)
+    return Plant(PlantCoreConfig(), scenario)
 
 
 def euler_deg(plant):

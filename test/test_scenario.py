@@ -16,7 +16,7 @@ SCENARIOS = sorted((pathlib.Path(__file__).parent.parent / 'config' / 'scenarios
 @pytest.mark.parametrize('path', SCENARIOS, ids=lambda p: p.stem)
 def test_shipped_scenarios_build_with_the_target_on_the_wall(path):
     scenario = load_scenario(path)
-    plant = Plant(PlantCoreConfig(), scenario, render=False)
+    plant = Plant(PlantCoreConfig(), scenario)
     try:
         world = plant.world
         poi = world.target_poi_map

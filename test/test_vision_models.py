@@ -13,7 +13,8 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from uav_tilt_sim.camera import CameraConfig, render
+from uav_tilt_sim.camera import CameraConfig, make_renderer
+from uav_tilt_sim.visuals import Scene
 from uav_tilt_vision import dataset, vision_cli
 from uav_tilt_vision.backends import load_detector
 from uav_tilt_vision.compress import size_stats
@@ -90,11 +91,13 @@ def plate_views(n, seed, distance_m=(0.5, 1.5), max_angle_deg=30.0):
     the vehicle's eye-in-hand camera with its tool in view."""
     cam, spec = CameraConfig(), dataset.SPLITS['heldout']
     rng = np.random.default_rng([seed, spec.stream])
+    renderer = make_renderer(cam)
     views = []
     while len(views) < n:
         client = p.connect(p.DIRECT)
+        scene = Scene(client)
         try:
-            info = dataset.build_random_world(client, rng, spec)
+            info = dataset.build_random_world(scene, rng, spec)
             plates = [o for o in info.objects if o.cls == 'bolt_plate']
             if not plates:
                 continue
@@ -109,13 +112,14 @@ def plate_views(n, seed, distance_m=(0.5, 1.5), max_angle_deg=30.0):
             x = np.cross([0.0, 0.0, -1.0], z)
             x /= np.linalg.norm(x)
             R_cam = np.column_stack([x, np.cross(z, x), z])
-            dataset.add_vehicle(client, eye, R_cam)
+            dataset.add_vehicle(scene, eye, R_cam)
             light = dataset.random_lighting(rng, spec, R_wall)
-            rgb, depth, _ = render(client, cam, eye, R_cam, light)
+            rgb, depth, _ = renderer.render(scene, eye, R_cam, light)
             views.append((dataset.photometric(rgb, rng), depth, R_cam.T @ (poi - eye),
                           R_cam.T @ R_wall[:, 2]))
         finally:
             p.disconnect(client)
+    renderer.close()
     return views
 
 

@@ -41,7 +41,7 @@ def make_plant(start_xyz, yaw_deg):
     scenario = load_scenario()
     scenario.start_xyz_m = list(start_xyz)
     scenario.start_yaw_deg = float(yaw_deg)
-    plant = Plant(PlantCoreConfig(), scenario, render=True)
+    plant = Plant(PlantCoreConfig(), scenario)
     cam = plant.config.camera
     K = CameraIntrinsics(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
     target = next(o for o in plant.world.objects if o.target)

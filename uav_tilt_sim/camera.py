@@ -1,5 +1,12 @@
-"""Eye-in-hand RGB-D camera: pinhole intrinsics, headless PyBullet rendering, metric depth."""
+"""Eye-in-hand RGB-D camera: pinhole intrinsics, two headless renderers, metric depth.
+
+``renderer: gl`` (the default) draws the scene with OpenGL on EGL
+(:mod:`uav_tilt_sim.gl_renderer`, about 1-2 ms a frame on a CPU); ``tiny`` is PyBullet's
+TinyRenderer (about 25 ms), which is also taken, with one warning, when GL cannot start.
+Both give the same pinhole projection, depth and shading.
+"""
 import dataclasses
+import sys
 
 import numpy as np
 import pybullet as p
@@ -20,6 +27,7 @@ class CameraConfig:
     near_m: float = param(0.03, lo=0.001, hi=1.0)
     far_m: float = param(12.0, lo=1.0, hi=100.0)
     rate_hz: float = param(30.0, lo=1.0, hi=120.0)
+    renderer: str = param('gl', choices=('gl', 'tiny'))
 
     def k_matrix(self):
         """3x3 intrinsic matrix K."""
@@ -84,3 +92,41 @@ def render(client, cam, p_cam_map, R_map_cam, lighting=None, segmentation=False)
     seg_img = np.asarray(seg, dtype=np.int64).reshape(cam.height, cam.width) \
         if segmentation else None
     return np.ascontiguousarray(rgb), depth, seg_img
+
+
+class TinyRenderer:
+    """PyBullet's TinyRenderer behind the renderer interface (draws the client's own
+    visual shapes; the scene is not needed)."""
+
+    name = 'tiny'
+
+    def __init__(self, cam):
+        self.cam = cam
+
+    def render(self, scene, p_cam_map, R_map_cam, lighting=None, segmentation=False):
+        """As :func:`render`, of the scene's physics client."""
+        return render(scene.client, self.cam, p_cam_map, R_map_cam, lighting, segmentation)
+
+    def close(self):
+        """Nothing to release."""
+
+
+def make_renderer(cam, warn=None):
+    """The renderer ``cam.renderer`` asks for; TinyRenderer, with one line to ``warn``
+    (default: stderr), when the GL renderer cannot start."""
+    if cam.renderer == 'gl':
+        from uav_tilt_sim.gl_renderer import GlRenderer
+        try:
+            return GlRenderer(cam)
+        except RuntimeError as err:
+            line = f'GL renderer unavailable: {err}; rendering with TinyRenderer (~25 ms a frame)'
+            if warn is None:
+                print(f'[camera] {line}', file=sys.stderr, flush=True)
+            else:
+                warn(line)
+    return TinyRenderer(cam)
+
+
+def render_with(renderer, scene, p_cam_map, R_map_cam, lighting=None, segmentation=False):
+    """``renderer.render`` with the default lighting when none is given."""
+    return renderer.render(scene, p_cam_map, R_map_cam, lighting or Lighting(), segmentation)

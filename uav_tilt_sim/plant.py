@@ -17,6 +17,7 @@ from uav_tilt_sim import camera as cam_mod
 from uav_tilt_sim import vehicle_body
 from uav_tilt_sim.actuators import RotorBank, Servo
 from uav_tilt_sim.sensors import SensorModel
+from uav_tilt_sim.visuals import Scene
 from uav_tilt_sim.world import build_world
 
 GRAVITY_MAP = np.array([0.0, 0.0, -GRAVITY])
@@ -58,24 +59,28 @@ class TickSensors:
 class Plant:
     """One simulated world; deterministic for a given scenario (seed included)."""
 
-    def __init__(self, config, scenario, render=True):
+    def __init__(self, config, scenario, warn=None):
+        """``warn``: where the one line about a renderer fallback goes (default stderr); the
+        renderer is made on the first :meth:`render`."""
         self.config = config
         self.scenario = scenario
         self.vehicle = config.vehicle
         self.dt_physics = 1.0 / config.physics_hz
         self.dt_tick = config.substeps * self.dt_physics
-        self.render_enabled = render
         self.client = p.connect(p.DIRECT)
         p.setGravity(*GRAVITY_MAP, physicsClientId=self.client)
         p.setPhysicsEngineParameter(fixedTimeStep=self.dt_physics,
                                     numSolverIterations=config.solver_iterations,
                                     physicsClientId=self.client)
-        self.world = build_world(self.client, scenario)
+        self.scene = Scene(self.client)
+        self.world = build_world(self.client, scenario, scene=self.scene)
         start = np.asarray(scenario.start_xyz_m, dtype=float)
         mm = scenario.mismatch
         ids = vehicle_body.create_vehicle(self.client, self.vehicle, [0, 0, 0],
                                           np.radians(scenario.start_yaw_deg),
-                                          mm.mass_scale, mm.inertia_scale)
+                                          mm.mass_scale, mm.inertia_scale, self.scene)
+        self._warn = warn
+        self.renderer = None        # made on the first render
         self.body = ids.body
         self.mass_kg = self.vehicle.mass_kg * mm.mass_scale
         # Resting on its skid when the start height is at or below the ground.
@@ -109,8 +114,16 @@ class Plant:
         """Simulated time of the current tick."""
         return self.tick * self.dt_tick
 
+    @property
+    def renderer_name(self):
+        """'gl' or 'tiny' once a frame was rendered, else None."""
+        return None if self.renderer is None else self.renderer.name
+
     def close(self):
-        """Release the physics server."""
+        """Release the renderer and the physics server."""
+        if self.renderer is not None:
+            self.renderer.close()
+            self.renderer = None
         if self.client is not None:
             p.disconnect(self.client)
             self.client = None
@@ -237,9 +250,11 @@ class Plant:
 
     def render(self, lighting=None, segmentation=False):
         """Render the eye-in-hand camera: (rgb, depth_m, seg)."""
+        if self.renderer is None:
+            self.renderer = cam_mod.make_renderer(self.config.camera, self._warn)
         p_cam, R_map_cam = self.camera_pose()
-        rgb, depth, seg = cam_mod.render(self.client, self.config.camera, p_cam, R_map_cam,
-                                         lighting, segmentation)
+        rgb, depth, seg = cam_mod.render_with(self.renderer, self.scene, p_cam, R_map_cam,
+                                              lighting, segmentation)
         return rgb, self.sensors.depth(depth), seg
 
 

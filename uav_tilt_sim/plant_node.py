@@ -54,7 +54,7 @@ class PlantNode(Node):
         super().__init__('plant')
         self.cfg = declare_config(self, PlantNodeConfig)
         scenario = load_scenario(self.cfg.scenario_file or None)
-        self.plant = Plant(self.cfg, scenario, render=self.cfg.camera_enabled)
+        self.plant = Plant(self.cfg, scenario, warn=self.get_logger().warn)
         self.camera_every = max(1, int(round(self.cfg.control_hz / self.cfg.camera.rate_hz)))
         q = ros_qos.CONTROL
         quiet = functools.partial(ros_qos.quiet_publisher, self)

@@ -230,3 +230,38 @@ def wall_texture(rng: np.random.Generator, size_px=512, family=None):
     """Randomised wall texture; ``family`` (one of WALL_FAMILIES) is drawn when None."""
     family = family or WALL_FAMILIES[int(rng.integers(len(WALL_FAMILIES)))]
     return _finish(_WALLS[family](rng, int(size_px)), rng, noise_sigma=3.0)
+
+
+def _asphalt(rng, s):
+    grey = rng.uniform(40, 95)
+    img = grey + rng.uniform(-6, 6, 3) + 18.0 * _fractal_noise(rng, (s, s), octaves=6)[..., None]
+    stones = rng.random((s, s)) < 0.02
+    img[stones] *= rng.uniform(1.2, 1.6)
+    return img
+
+
+def _gravel(rng, s):
+    base = rng.uniform(90, 160) + rng.uniform(-10, 10, 3)
+    img = np.ones((s, s, 3), np.float32) * base
+    for _ in range(int(s * s / 60)):
+        c = (int(rng.integers(s)), int(rng.integers(s)))
+        tone = tuple(float(v) for v in base * rng.uniform(0.6, 1.3))
+        cv2.circle(img, c, int(rng.integers(1, 4)), tone, -1)
+    return img + 8.0 * _fractal_noise(rng, (s, s))[..., None]
+
+
+def _grass(rng, s):
+    green = np.float32([rng.uniform(40, 90), rng.uniform(80, 140), rng.uniform(20, 60)])
+    img = green * (1.0 + 0.35 * _fractal_noise(rng, (s, s), octaves=6)[..., None])
+    blades = cv2.resize(rng.normal(0, 1, (s // 4, s)).astype(np.float32), (s, s))
+    return img + 12.0 * blades[..., None]
+
+
+GROUND_FAMILIES = ('concrete', 'asphalt', 'gravel', 'grass')
+_GROUNDS = {'concrete': _concrete, 'asphalt': _asphalt, 'gravel': _gravel, 'grass': _grass}
+
+
+def ground_texture(rng: np.random.Generator, size_px=256, family=None):
+    """Randomised ground texture (one GROUND_FAMILIES member, drawn when None)."""
+    family = family or GROUND_FAMILIES[int(rng.integers(len(GROUND_FAMILIES)))]
+    return _finish(_GROUNDS[family](rng, int(size_px)), rng, noise_sigma=3.0)

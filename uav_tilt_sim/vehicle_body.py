@@ -9,6 +9,8 @@ import dataclasses
 import numpy as np
 import pybullet as p
 
+from uav_tilt_sim.visuals import BOX, CYLINDER, SPHERE, Visual, pybullet_shape
+
 ARM_FRONT, ARM_REAR, TOOL = 0, 1, 2     # link indices = joint indices
 TOOL_ROOT_X_M = 0.10                    # where the tool rod leaves the hub
 HUB_HALF_EXTENTS_M = (0.08, 0.07, 0.05)
@@ -32,8 +34,10 @@ def _rod_inertia(mass, length, axis):
     return inertia
 
 
-def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia_scale=1.0):
-    """Create the vehicle in ``client``; returns :class:`BodyIds`.
+def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia_scale=1.0,
+                   scene=None):
+    """Create the vehicle in ``client`` (its visuals in ``scene`` when given); returns
+    :class:`BodyIds`.
 
     ``vehicle`` is a VehicleParams; mass/inertia scales model a plant that differs from it.
     """
@@ -60,10 +64,9 @@ def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia
     hub_col = p.createCollisionShape(
         p.GEOM_BOX, halfExtents=HUB_HALF_EXTENTS_M,
         collisionFramePosition=[0, 0, HUB_CENTRE_Z_M], physicsClientId=client)
-    hub_vis = p.createVisualShape(
-        p.GEOM_BOX, halfExtents=HUB_HALF_EXTENTS_M, rgbaColor=[0.15, 0.15, 0.18, 1],
-        visualFramePosition=[0, 0, HUB_CENTRE_Z_M], physicsClientId=client)
-    arm_vis = _arm_visual(client, vehicle.l1_m)
+    hub = [Visual(BOX, HUB_HALF_EXTENTS_M, (0.15, 0.15, 0.18, 1.0),
+                  position=(0.0, 0.0, HUB_CENTRE_Z_M))]
+    arm = [_arm_visual(vehicle.l1_m)]
     # ee_link is the front of the spherical tip, tool_tip_x_m ahead of base_link.
     tip_centre_x = tool_len / 2.0 - vehicle.tool_tip_radius_m
     tool_col = p.createCollisionShape(
@@ -73,13 +76,11 @@ def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia
     rod_start = max(TOOL_ROOT_X_M, vehicle.camera_xyz_m[0] + VISUAL_CLEARANCE_M)
     rod_len = vehicle.tool_tip_x_m - vehicle.tool_tip_radius_m - rod_start
     rod_centre = rod_start + rod_len / 2 - tool_com_x
-    tool_vis = p.createVisualShapeArray(
-        shapeTypes=[p.GEOM_CYLINDER, p.GEOM_SPHERE],
-        radii=[0.006, vehicle.tool_tip_radius_m], lengths=[rod_len, 0.0],
-        rgbaColors=[[0.7, 0.7, 0.72, 1], [0.9, 0.3, 0.1, 1]],
-        visualFramePositions=[[rod_centre, 0, 0], [tip_centre_x, 0, 0]],
-        visualFrameOrientations=[p.getQuaternionFromEuler([0, np.pi / 2, 0]), [0, 0, 0, 1]],
-        physicsClientId=client)
+    tool = [Visual(CYLINDER, (0.006, rod_len), (0.7, 0.7, 0.72, 1.0), position=(rod_centre, 0, 0),
+                   quaternion=tuple(p.getQuaternionFromEuler([0, np.pi / 2, 0]))),
+            Visual(SPHERE, (vehicle.tool_tip_radius_m,), (0.9, 0.3, 0.1, 1.0),
+                   position=(tip_centre_x, 0, 0))]
+    hub_vis, arm_vis, tool_vis = (pybullet_shape(client, v) for v in (hub, arm, tool))
 
     body = p.createMultiBody(
         baseMass=m_hub, baseCollisionShapeIndex=hub_col, baseVisualShapeIndex=hub_vis,
@@ -106,15 +107,16 @@ def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia
     for joint in (ARM_FRONT, ARM_REAR):
         # createMultiBody leaves the joint speed limit at 0, which freezes position motors.
         p.changeDynamics(body, joint, maxJointVelocity=50.0, physicsClientId=client)
+    if scene is not None:
+        for link, visuals in ((-1, hub), (ARM_FRONT, arm), (ARM_REAR, arm), (TOOL, tool)):
+            scene.add(body, link, visuals, static=False)
     bottom = -(HUB_HALF_EXTENTS_M[2] - HUB_CENTRE_Z_M)
     return BodyIds(body, hub_com, bottom)
 
 
-def _arm_visual(client, l1_m):
+def _arm_visual(l1_m):
     """An arm rod along y. Propellers are not drawn: spinning blades are nearly invisible to
     a camera, and discs passing behind the eye-in-hand camera's near plane are mis-drawn
     by TinyRenderer (no near-plane clipping)."""
-    return p.createVisualShape(
-        p.GEOM_CYLINDER, radius=0.008, length=2 * l1_m, rgbaColor=[0.2, 0.2, 0.2, 1],
-        visualFrameOrientation=p.getQuaternionFromEuler([np.pi / 2, 0, 0]),
-        physicsClientId=client)
+    return Visual(CYLINDER, (0.008, 2 * l1_m), (0.2, 0.2, 0.2, 1.0),
+                  quaternion=tuple(p.getQuaternionFromEuler([np.pi / 2, 0, 0])))

@@ -1,18 +1,19 @@
 """The world of a scenario in PyBullet: ground, a (yawed, inclined) wall, textured objects."""
 import dataclasses
-import os
-import tempfile
 
-import cv2
 import numpy as np
 import pybullet as p
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_sim import textures
+from uav_tilt_sim.visuals import QUAD, Visual, create_static_body
 
 WALL_THICKNESS_M = 0.2
 PANEL_THICKNESS_M = 0.01
-TILE_M = 0.5     # wall tiles (see _quad_visual)
+TILE_M = 0.5     # wall tiles (see visuals.Visual)
+GROUND_HALF_M = 20.0
+GROUND_TILE_M = 2.0
+GROUND_TEXTURE_M = 2.0   # the ground texture repeats every 2 m
 
 
 @dataclasses.dataclass
@@ -35,6 +36,7 @@ class WorldInfo:
     wall_body: int
     ground_body: int
     objects: list
+    wall_visual: Visual = None                 # the wall's textured face
     target_poi_map: np.ndarray = None      # point of interest on the target's front face
     R_map_target: np.ndarray = None        # z = surface normal out of the wall
 
@@ -53,60 +55,31 @@ def wall_rotation(yaw_deg, inclination_deg):
     return np.column_stack([right, up, normal])
 
 
-def _quad_visual(client, half_w, half_h, texture_rgb, tmpdir, name, tile_m=None,
-                 offset_z=0.0):
-    """A textured rectangle facing +z of its frame, ``offset_z`` along it: texture row 0 at
-    +y, column 0 at -x.
-
-    Large rectangles are split into tiles of about ``tile_m``: TinyRenderer drops a whole
-    triangle when its vertices project far outside the image, which made big walls vanish
-    in halves at some camera poses.
-    """
-    path = os.path.join(tmpdir, name + '.png')
-    cv2.imwrite(path, cv2.cvtColor(texture_rgb, cv2.COLOR_RGB2BGR))
-    nx = max(1, int(np.ceil(2 * half_w / tile_m))) if tile_m else 1
-    ny = max(1, int(np.ceil(2 * half_h / tile_m))) if tile_m else 1
-    u, v = np.meshgrid(np.linspace(0.0, 1.0, nx + 1), np.linspace(0.0, 1.0, ny + 1))
-    vertices = np.column_stack([(2 * u.ravel() - 1) * half_w, (2 * v.ravel() - 1) * half_h,
-                                np.zeros(u.size)])
-    corner = (np.arange(ny)[:, None] * (nx + 1) + np.arange(nx)[None, :]).ravel()
-    # Two counter-clockwise triangles (seen from +z) per tile.
-    indices = np.column_stack([corner, corner + 1, corner + nx + 2,
-                               corner, corner + nx + 2, corner + nx + 1]).ravel()
-    visual = p.createVisualShape(
-        p.GEOM_MESH, vertices=vertices.tolist(), indices=indices.tolist(),
-        uvs=np.column_stack([u.ravel(), v.ravel()]).tolist(),
-        normals=[[0, 0, 1]] * len(vertices), visualFramePosition=[0, 0, offset_z],
-        physicsClientId=client)
-    return visual, p.loadTexture(path, physicsClientId=client)
-
-
-def build_world(client, scenario, texture_rng=None):
-    """Create ground, wall and objects of ``scenario``; returns :class:`WorldInfo`."""
+def build_world(client, scenario, texture_rng=None, scene=None):
+    """Create ground, wall and objects of ``scenario`` (their visuals in ``scene`` when
+    given); returns :class:`WorldInfo`."""
     rng = texture_rng or np.random.default_rng(
         scenario.texture_seed if scenario.texture_seed >= 0 else scenario.seed)
     wall = scenario.wall
     R = wall_rotation(wall.yaw_deg, wall.inclination_deg)
     origin = np.array([wall.position_m[0], wall.position_m[1], 0.0])
     quat = Rotation.from_matrix(R).as_quat().tolist()
-    with tempfile.TemporaryDirectory() as tmpdir:
-        ground = _build_ground(client)
-        centre = origin + R[:, 1] * wall.height_m / 2 - R[:, 2] * WALL_THICKNESS_M / 2
-        col = p.createCollisionShape(
-            p.GEOM_BOX, halfExtents=[wall.width_m / 2, wall.height_m / 2, WALL_THICKNESS_M / 2],
-            physicsClientId=client)
-        # The textured face is the box's only visual: a body without one would be drawn from
-        # its collision box, whose front face z-fights with the texture.
-        vis, tex = _quad_visual(client, wall.width_m / 2, wall.height_m / 2,
-                                textures.wall_texture(rng), tmpdir, 'wall', TILE_M,
-                                offset_z=WALL_THICKNESS_M / 2)
-        wall_body = p.createMultiBody(0.0, col, vis, centre.tolist(), quat,
-                                      physicsClientId=client)
-        p.changeVisualShape(wall_body, -1, textureUniqueId=tex, physicsClientId=client)
-        _set_contact(client, wall_body, wall)
-        objects = [_build_object(client, o, origin, R, quat, rng, tmpdir, i, wall)
-                   for i, o in enumerate(scenario.objects)]
-    info = WorldInfo(R, origin, wall_body, ground, objects)
+    centre = origin + R[:, 1] * wall.height_m / 2 - R[:, 2] * WALL_THICKNESS_M / 2
+    col = p.createCollisionShape(
+        p.GEOM_BOX, halfExtents=[wall.width_m / 2, wall.height_m / 2, WALL_THICKNESS_M / 2],
+        physicsClientId=client)
+    # The textured face is the box's only visual: a body without one would be drawn from
+    # its collision box, whose front face z-fights with the texture.
+    face = Visual(QUAD, (wall.width_m / 2, wall.height_m / 2),
+                  texture=textures.wall_texture(rng), position=(0.0, 0.0, WALL_THICKNESS_M / 2),
+                  tile_m=TILE_M)
+    wall_body = create_static_body(client, scene, face, centre, quat, col)
+    _set_contact(client, wall_body, wall)
+    objects = [_build_object(client, scene, o, origin, R, quat, rng, wall)
+               for o in scenario.objects]
+    # drawn last, so that the wall and object textures of a seed stay what they were
+    ground = _build_ground(client, scene, rng)
+    info = WorldInfo(R, origin, wall_body, ground, objects, wall_visual=face)
     for obj, cfg in zip(objects, scenario.objects):
         if cfg.target:
             du, dv = (np.asarray(textures.POI_UV[cfg.cls]) - 0.5) * textures.OBJECT_SIZE_M
@@ -121,24 +94,24 @@ def _set_contact(client, body, wall):
                      physicsClientId=client)
 
 
-def _build_ground(client):
-    # Collision only: TinyRenderer does not clip triangles at the near plane, so a ground
-    # mesh passing under the camera was drawn across the image.
-    ground = p.createMultiBody(0.0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client),
-                               -1, [0, 0, 0], physicsClientId=client)
+def _build_ground(client, scene, rng):
+    # Tiled, for the same TinyRenderer reason as the wall; without a visual of its own the
+    # plane would be drawn from its collision shape with PyBullet's checker texture.
+    face = Visual(QUAD, (GROUND_HALF_M, GROUND_HALF_M), texture=textures.ground_texture(rng),
+                  tile_m=GROUND_TILE_M, texture_m=GROUND_TEXTURE_M)
+    ground = create_static_body(client, scene, face, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0),
+                                p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client))
     p.changeDynamics(ground, -1, lateralFriction=0.8, physicsClientId=client)
     return ground
 
 
-def _build_object(client, cfg, origin, R, quat, rng, tmpdir, index, wall):
+def _build_object(client, scene, cfg, origin, R, quat, rng, wall):
     half = textures.OBJECT_SIZE_M / 2
     front = origin + R[:, 0] * cfg.u_m + R[:, 1] * cfg.v_m + R[:, 2] * PANEL_THICKNESS_M
     col = p.createCollisionShape(
         p.GEOM_BOX, halfExtents=[half, half, PANEL_THICKNESS_M / 2],
         collisionFramePosition=[0, 0, -PANEL_THICKNESS_M / 2], physicsClientId=client)
-    vis, tex = _quad_visual(client, half, half, textures.object_texture(cfg.cls, rng),
-                            tmpdir, f'object{index}')
-    body = p.createMultiBody(0.0, col, vis, front.tolist(), quat, physicsClientId=client)
-    p.changeVisualShape(body, -1, textureUniqueId=tex, physicsClientId=client)
+    face = Visual(QUAD, (half, half), texture=textures.object_texture(cfg.cls, rng))
+    body = create_static_body(client, scene, face, front, quat, col)
     _set_contact(client, body, wall)
     return ObjectInstance(cfg.cls, body, front, cfg.target)

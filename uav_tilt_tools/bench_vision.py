@@ -33,7 +33,7 @@ def rendered_frames(n=N_FRAMES):
     and drifts sideways at ~0.1 m/s."""
     scenario = load_scenario()
     scenario.start_xyz_m = [1.38, 0.0, 1.43]
-    plant = Plant(PlantCoreConfig(), scenario, render=True)
+    plant = Plant(PlantCoreConfig(), scenario)
     try:
         hover = np.full(4, plant.mass_kg * GRAVITY / 4)
         plant.set_actuator_state(hover, 0.0, 0.0)

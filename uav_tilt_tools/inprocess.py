@@ -27,7 +27,7 @@ class Flight:
                  vision=None):
         self.vehicle = vehicle or VehicleParams()
         plant_config = plant_config or PlantCoreConfig(vehicle=self.vehicle)
-        self.plant = Plant(plant_config, scenario, render=vision is not None)
+        self.plant = Plant(plant_config, scenario)
         self.core = ControllerCore(self.vehicle, controller_config or ControllerConfig())
         self.vision = vision
         self.odometry_enabled = True

@@ -9,7 +9,7 @@
 3. ``export_onnx`` + ``quantize_int8``: ONNX Runtime static quantization, QDQ format,
    per-channel int8 weights, uint8 activations calibrated (99.999th percentile) on
    training images. BatchNorm is folded into the convs by the exporter. The graph outputs
-   the raw heads; the three head convs stay float (they hold box offsets, sizes and logits
+   the raw heads; the head convs stay float (they hold box offsets, sizes and logits
    of very different ranges, which one int8 scale per tensor cannot; they are 1x1 convs, a
    few percent of the MACs), and so does the stem at full and half input resolution (the
    first two conv blocks and their pools: with 3-12 channels per pixel ONNX Runtime's int8
@@ -31,7 +31,7 @@ from uav_tilt_vision.train import card_path, evaluate, git_commit, train
 from uav_tilt_vision.yolo_data import YoloDataset
 
 ONNX_OPSET = 17
-HEAD_OUTPUTS = ('head0', 'head1', 'head2')
+HEAD_OUTPUTS = ('head0', 'head1', 'head2', 'head3')
 CALIB_PERCENTILE = 99.999
 FLOAT_STEM_POOLS = 2   # the float stem ends with the second maxpool (stride 4)
 QUANTIZATION = ('onnxruntime static QDQ, per-channel int8 weights, uint8 activations, '

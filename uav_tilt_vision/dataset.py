@@ -1,9 +1,10 @@
 """Domain-randomised, automatically labelled detector images rendered with the plant's world.
 
-Each world (wall, ground, 1-5 inspection objects, plain distractor panels) is built with
+Each world (wall, ground, 1-5 inspection objects, half of them bolt plates, plain
+distractor panels) is built with
 ``uav_tilt_sim.world.build_world`` and photographed by the plant's camera model from
-``IMAGES_PER_WORLD`` random poses: 0.4-4 m (log-uniform) from a point on the wall, up to
-45 deg off its normal, with roll jitter and, sometimes, an occluding bar in front. Lighting,
+``IMAGES_PER_WORLD`` random poses: 0.4-5.5 m (log-uniform) from a point on the wall, up to
+55 deg off its normal, with roll jitter and, sometimes, an occluding bar in front. Lighting,
 exposure, blur and sensor noise are drawn per image. In ``VEHICLE_PROB`` of the images the
 camera is the vehicle's own eye-in-hand camera, so its tool (rod and tip) is in view as in
 flight, in front of the target at contact. Boxes are the tight bounds of each object's
@@ -19,9 +20,9 @@ Image k of a set depends only on (seed, split, k // IMAGES_PER_WORLD), not on ``
 """
 
 import dataclasses
+import functools
 import json
 import multiprocessing
-import tempfile
 from pathlib import Path
 
 import cv2
@@ -32,10 +33,11 @@ from tqdm import tqdm
 
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim import textures
-from uav_tilt_sim.camera import CameraConfig, Lighting, render
+from uav_tilt_sim.camera import CameraConfig, Lighting, make_renderer
 from uav_tilt_sim.plant import camera_rotation_in_base
 from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
 from uav_tilt_sim.vehicle_body import create_vehicle
+from uav_tilt_sim.visuals import BOX, Scene, Visual, apply_texture, create_static_body
 from uav_tilt_sim.world import build_world
 
 CLASSES = textures.OBJECT_CLASSES
@@ -44,8 +46,12 @@ MIN_VISIBLE_PX = 30
 # An object less visible than this (occluded or cut by the image border) is not labelled:
 # too little of it is left to tell its class.
 MIN_VISIBLE_FRACTION = 0.35
-MAX_VIEW_ANGLE_DEG = 45.0
-DISTANCE_M = (0.4, 4.0)
+# The mission sees its target from up to 5 m (a plate then spans about 11 px) and, while it
+# searches, up to about 50 degrees off the wall's normal.
+MAX_VIEW_ANGLE_DEG = 55.0
+DISTANCE_M = (0.4, 5.5)
+# Half of the objects are of the target class (bolt plates), which walls carry several of.
+CLASS_PROBS = (0.5, 0.25, 0.25)
 PATCH_UV_M = ((-2.0, 0.3), (2.0, 3.1))   # where objects and panels go on the wall (u, v)
 OCCLUDER_PROB = 0.3
 VEHICLE_PROB = 0.5
@@ -80,37 +86,34 @@ def random_scenario(rng):
     for _ in range(int(rng.integers(1, 6))):
         u, v = rng.uniform(*PATCH_UV_M)
         if all(max(abs(u - o.u_m), abs(v - o.v_m)) > 0.3 for o in objects):
-            cls = CLASSES[int(rng.integers(len(CLASSES)))]
+            cls = CLASSES[int(rng.choice(len(CLASSES), p=CLASS_PROBS))]
             objects.append(ObjectConfig(cls=cls, u_m=float(u), v_m=float(v)))
     return Scenario(wall=wall, objects=objects)
 
 
-def _box_body(client, centre, R, half_extents, rng):
+def _box_body(scene, centre, R, half_extents, rng):
     """A plain-coloured static box oriented by R (map)."""
-    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half_extents),
-                              rgbaColor=list(rng.uniform(0, 1, 3)) + [1.0],
-                              physicsClientId=client)
-    return p.createMultiBody(0.0, -1, vis, list(centre), Rotation.from_matrix(R).as_quat(),
-                             physicsClientId=client)
+    box = Visual(BOX, tuple(half_extents), tuple(rng.uniform(0, 1, 3)) + (1.0,))
+    return create_static_body(scene.client, scene, box, centre,
+                              Rotation.from_matrix(R).as_quat())
 
 
-def build_random_world(client, rng, spec):
+def build_random_world(scene, rng, spec):
     """Build a random world whose wall texture is of one of ``spec``'s families."""
     scenario = random_scenario(rng)
-    info = build_world(client, scenario, texture_rng=rng)
+    client = scene.client
+    info = build_world(client, scenario, texture_rng=rng, scene=scene)
     family = spec.wall_families[int(rng.integers(len(spec.wall_families)))]
-    with tempfile.TemporaryDirectory() as tmpdir:
-        path = str(Path(tmpdir) / 'wall.png')
-        tex = textures.wall_texture(rng, family=family)
-        cv2.imwrite(path, cv2.cvtColor(tex, cv2.COLOR_RGB2BGR))
-        p.changeVisualShape(info.wall_body, -1, physicsClientId=client,
-                            textureUniqueId=p.loadTexture(path, physicsClientId=client))
+    face = dataclasses.replace(info.wall_visual,
+                               texture=textures.wall_texture(rng, family=family))
+    apply_texture(client, info.wall_body, face)
+    scene.add(info.wall_body, -1, [face], static=True)
     R = info.R_map_wall
     for _ in range(int(rng.integers(0, 4))):     # distractors: object-sized plain panels
         u, v = rng.uniform(*PATCH_UV_M)
         if all(max(abs(u - o.u_m), abs(v - o.v_m)) > 0.3 for o in scenario.objects):
             centre = info.wall_origin_map + R @ [u, v, 0.004]
-            _box_body(client, centre, R, [*rng.uniform(0.05, 0.15, 2), 0.003], rng)
+            _box_body(scene, centre, R, [*rng.uniform(0.05, 0.15, 2), 0.003], rng)
     return info
 
 
@@ -149,21 +152,22 @@ def random_lighting(rng, spec, R_map_wall):
                     specular=float(rng.uniform(0.0, 0.2)))
 
 
-def add_occluder(client, rng, eye, info):
+def add_occluder(scene, rng, eye, info):
     """A bar (pipe, cable, strut) between the camera and a random object; its body id."""
     obj = info.objects[int(rng.integers(len(info.objects)))]
     t = rng.uniform(0.3, 0.85)
     centre = eye + t * (obj.centre_map - eye) + rng.uniform(-0.12, 0.12, 3) * t
     R = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
-    return _box_body(client, centre, R, [rng.uniform(0.005, 0.05), rng.uniform(0.1, 0.8),
-                                         rng.uniform(0.005, 0.05)], rng)
+    return _box_body(scene, centre, R, [rng.uniform(0.005, 0.05), rng.uniform(0.1, 0.8),
+                                        rng.uniform(0.005, 0.05)], rng)
 
 
-def add_vehicle(client, eye, R_map_cam, vehicle=VehicleParams()):
+def add_vehicle(scene, eye, R_map_cam, vehicle=VehicleParams()):
     """The vehicle posed so that its eye-in-hand camera is at (eye, R_map_cam); its body id."""
+    client = scene.client
     R_map_base = R_map_cam @ camera_rotation_in_base(vehicle.camera_pitch_rad).T
     p_base = eye - R_map_base @ np.asarray(vehicle.camera_xyz_m)
-    body = create_vehicle(client, vehicle, p_base.tolist(), 0.0).body
+    body = create_vehicle(client, vehicle, p_base.tolist(), 0.0, scene=scene).body
     p.resetBasePositionAndOrientation(body, p_base.tolist(),
                                       Rotation.from_matrix(R_map_base).as_quat().tolist(),
                                       physicsClientId=client)
@@ -217,25 +221,33 @@ def labels_from_segmentation(seg, info, eye, R_map_cam, cam):
     return rows, ignore
 
 
+@functools.lru_cache(maxsize=None)
+def _renderer(renderer):
+    """One renderer per process (a GL context is costly to make), reused for every world."""
+    return make_renderer(dataclasses.replace(CameraConfig(), renderer=renderer))
+
+
 def render_world(job):
     """Render and write the images of one world; returns the class ids it labelled."""
-    out, seed, split, world, indices = job
+    out, seed, split, world, indices, renderer = job
     spec, cam = SPLITS[split], CameraConfig()
     rng = np.random.default_rng([seed, spec.stream, world])
     client = p.connect(p.DIRECT)
+    scene = Scene(client)
     try:
-        info = build_random_world(client, rng, spec)
+        info = build_random_world(scene, rng, spec)
         classes = []
         for k in indices:
             eye, R_cam = camera_pose(rng, info, cam)
-            extra = [add_occluder(client, rng, eye, info)] \
+            extra = [add_occluder(scene, rng, eye, info)] \
                 if rng.random() < OCCLUDER_PROB else []
             if rng.random() < VEHICLE_PROB:
-                extra.append(add_vehicle(client, eye, R_cam))
+                extra.append(add_vehicle(scene, eye, R_cam))
             light = random_lighting(rng, spec, info.R_map_wall)
-            rgb, _, seg = render(client, cam, eye, R_cam, light, segmentation=True)
+            rgb, _, seg = _renderer(renderer).render(scene, eye, R_cam, light, True)
             for body in extra:
                 p.removeBody(body, physicsClientId=client)
+                scene.remove(body)
             rows, ignore = labels_from_segmentation(seg, info, eye, R_cam, cam)
             cv2.imwrite(str(Path(out) / 'images' / f'{k:06d}.png'),
                         cv2.cvtColor(photometric(rgb, rng), cv2.COLOR_RGB2BGR))
@@ -252,8 +264,12 @@ def label_text(rows):
     return ''.join(f'{int(r[0])} ' + ' '.join(f'{v:.6f}' for v in r[1:]) + '\n' for r in rows)
 
 
-def generate(out, n, seed=0, split='train', jobs=1, show_progress=True):
-    """Write ``n`` labelled images and ``meta.json`` to ``out``; returns the meta dict."""
+def generate(out, n, seed=0, split='train', jobs=1, show_progress=True, renderer='gl'):
+    """Write ``n`` labelled images and ``meta.json`` to ``out``; returns the meta dict.
+
+    ``renderer``: the camera's renderer (``gl`` or ``tiny``, see ``uav_tilt_sim.camera``);
+    train on images of the renderer the plant uses.
+    """
     if split not in SPLITS:
         raise ValueError(f'unknown split {split!r}; expected one of {tuple(SPLITS)}')
     out = Path(out)
@@ -261,7 +277,7 @@ def generate(out, n, seed=0, split='train', jobs=1, show_progress=True):
     for folder in ('labels', 'ignore'):
         (out / folder).mkdir(parents=True, exist_ok=True)
     worlds = [(str(out), seed, split, w, range(w * IMAGES_PER_WORLD,
-                                               min((w + 1) * IMAGES_PER_WORLD, n)))
+                                               min((w + 1) * IMAGES_PER_WORLD, n)), renderer)
               for w in range(-(-n // IMAGES_PER_WORLD))]
     bar = tqdm(total=n, desc=f'dataset {split}', unit='img', disable=not show_progress)
     counts = np.zeros(len(CLASSES), int)
@@ -275,8 +291,10 @@ def generate(out, n, seed=0, split='train', jobs=1, show_progress=True):
             'split_spec': dataclasses.asdict(SPLITS[split]),
             'heldout_policy': 'train and heldout use disjoint RNG streams (all textures), '
                               'disjoint wall families and disjoint lighting ranges',
-            'camera': dataclasses.asdict(CameraConfig()), 'distance_m': list(DISTANCE_M),
-            'max_view_angle_deg': MAX_VIEW_ANGLE_DEG, 'occluder_prob': OCCLUDER_PROB,
+            'camera': dataclasses.asdict(CameraConfig(renderer=renderer)),
+            'renderer': _renderer(renderer).name, 'distance_m': list(DISTANCE_M),
+            'max_view_angle_deg': MAX_VIEW_ANGLE_DEG, 'class_probs': list(CLASS_PROBS),
+            'occluder_prob': OCCLUDER_PROB,
             'vehicle_prob': VEHICLE_PROB,
             'min_visible_px': MIN_VISIBLE_PX, 'min_visible_fraction': MIN_VISIBLE_FRACTION}
     (out / 'meta.json').write_text(json.dumps(meta, indent=2))

@@ -8,18 +8,22 @@ Architecture (darknet ``yolov3-tiny.cfg``): eleven conv-BN-leaky(0.1) layers
     c7 1x1 -> c8 3x3 -> head0 (stride 32)
     c7 -> c9 1x1 -> upsample x2 -> concat(c4) -> c10 3x3 -> head1 (stride 16)
 
-With ``scales=3`` (darknet ``yolov3-tiny_3l.cfg``) a third branch serves small objects:
+With ``scales=3`` (darknet ``yolov3-tiny_3l.cfg``) a third branch serves small objects,
+and ``scales=4`` adds a fourth in the same way for the smallest (a 0.2 m plate 5 m away
+spans about 11 px of the 320x240 image):
 
     c10 -> c11 1x1 -> upsample x2 -> concat(c3) -> c12 3x3 -> head2 (stride 8)
+    c12 -> c13 1x1 -> upsample x2 -> concat(c2) -> c14 3x3 -> head3 (stride 4)
 
-The reference channel list is 16-32-64-128-256-512-1024-256-512-128-256 (-128-128);
+The reference channel list is 16-32-64-128-256-512-1024-256-512-128-256 (-128-128 (-64-64));
 ``width_mult`` scales it, and ``channels`` gives every conv explicitly so that a
 structurally pruned model (irregular counts) can be rebuilt by ``load_model``.
 
 Input size: the 320x240 camera image is letterboxed to 320x256 (8 px grey bands
 top and bottom, scale 1): both dimensions must be multiples of the largest
 stride 32, and 256 is the smallest such height that keeps the full image
-unscaled. Grids are 10x8 (stride 32), 20x16 (stride 16) and 40x32 (stride 8).
+unscaled. Grids are 10x8 (stride 32), 20x16 (stride 16), 40x32 (stride 8) and 80x64
+(stride 4).
 """
 
 import numpy as np
@@ -30,19 +34,23 @@ from uav_tilt_vision.boxes import decode, letterbox, nms, unscale_boxes
 from uav_tilt_vision.exposure import normalize_exposure
 
 REF_CHANNELS = (16, 32, 64, 128, 256, 512, 1024, 256, 512, 128, 256)
-REF_CHANNELS_3L = REF_CHANNELS + (128, 128)
-STRIDES = (32, 16, 8)
+# the extra (1x1, 3x3) pair of each further scale
+EXTRA_SCALE_CHANNELS = ((128, 128), (64, 64))
+STRIDES = (32, 16, 8, 4)
 IMG_SIZE = (320, 256)
 # Per-scale anchors (w, h) in input pixels, [stride 32, stride 16, stride 8]; sized for the
 # objects of 320-px inspection images (train.py replaces them by k-means on the labels).
 DEFAULT_ANCHORS = {2: (((48, 40), (72, 80), (128, 112)), ((10, 12), (18, 22), (30, 32))),
                    3: (((60, 60), (90, 90), (128, 124)), ((26, 28), (36, 38), (46, 48)),
-                       ((9, 10), (13, 15), (18, 20)))}
+                       ((9, 10), (13, 15), (18, 20))),
+                   4: (((70, 70), (100, 100), (140, 130)), ((36, 38), (46, 48), (56, 58)),
+                       ((18, 20), (23, 25), (28, 30)), ((7, 8), (10, 11), (13, 15)))}
+SCALES = tuple(DEFAULT_ANCHORS)
 
 
 def reference_channels(scales=2):
     """The darknet channel list of the ``scales``-head YOLOv3-tiny."""
-    return list(REF_CHANNELS if scales == 2 else REF_CHANNELS_3L)
+    return list(REF_CHANNELS) + [c for pair in EXTRA_SCALE_CHANNELS[:scales - 2] for c in pair]
 
 
 def scaled_channels(width_mult, scales=2):
@@ -60,13 +68,13 @@ class ConvBNAct(nn.Sequential):
 
 class Detector(nn.Module):
     """YOLOv3-tiny family: ``forward`` returns raw heads [(B, A*(5+C), H/32, W/32), (.., /16)]
-    and, with ``scales=3``, (.., /8)."""
+    and, with ``scales`` 3 and 4, (.., /8) and (.., /4)."""
 
     def __init__(self, num_classes=80, width_mult=1.0, channels=None, anchors=None,
                  img_size=IMG_SIZE, scales=2):
         super().__init__()
-        if scales not in (2, 3):
-            raise ValueError(f'scales must be 2 or 3, got {scales}')
+        if scales not in SCALES:
+            raise ValueError(f'scales must be one of {SCALES}, got {scales}')
         ch = list(channels) if channels is not None else scaled_channels(width_mult, scales)
         n_convs = len(reference_channels(scales))
         if len(ch) != n_convs:
@@ -90,19 +98,21 @@ class Detector(nn.Module):
         self.up = nn.Upsample(scale_factor=2, mode='nearest')
         self.c10 = ConvBNAct(ch[9] + ch[4], ch[10], 3)
         self.head1 = nn.Conv2d(ch[10], n_out, 1)
-        if scales == 3:
-            self.c11 = ConvBNAct(ch[10], ch[11], 1)
-            self.c12 = ConvBNAct(ch[11] + ch[3], ch[12], 3)
-            self.head2 = nn.Conv2d(ch[12], n_out, 1)
+        # scale k >= 2: c(2k+7) 1x1 -> upsample -> concat(route of stride 2^(5-k)) -> c(2k+8)
+        for k in range(2, scales):
+            i = 2 * k + 7
+            setattr(self, f'c{i}', ConvBNAct(ch[i - 1], ch[i], 1))
+            setattr(self, f'c{i + 1}', ConvBNAct(ch[i] + ch[5 - k], ch[i + 1], 3))
+            setattr(self, f'head{k}', nn.Conv2d(ch[i + 1], n_out, 1))
         self._init_head_bias()
 
     @property
     def heads(self):
         """The 1x1 detection convs, coarsest first."""
-        return [self.head0, self.head1] + ([self.head2] if len(self.strides) == 3 else [])
+        return [getattr(self, f'head{k}') for k in range(len(self.strides))]
 
     def _convs(self):
-        extra = [self.c11, self.c12] if len(self.strides) == 3 else []
+        extra = [getattr(self, f'c{i}') for i in range(11, 2 * len(self.strides) + 7)]
         return list(self.backbone) + [self.c7, self.c8, self.c9, self.c10] + extra
 
     def _init_head_bias(self):
@@ -135,9 +145,11 @@ class Detector(nn.Module):
         out = [self.head0(self.c8(x))]
         y = self.c10(torch.cat([self.up(self.c9(x)), routes[4]], 1))
         out.append(self.head1(y))
-        if len(self.strides) == 3:
-            y = self.c12(torch.cat([self.up(self.c11(y)), routes[3]], 1))
-            out.append(self.head2(y))
+        for k in range(2, len(self.strides)):
+            i = 2 * k + 7
+            y = getattr(self, f'c{i + 1}')(torch.cat(
+                [self.up(getattr(self, f'c{i}')(y)), routes[5 - k]], 1))
+            out.append(getattr(self, f'head{k}')(y))
         return out
 
     @torch.no_grad()

@@ -17,8 +17,9 @@ def log_stderr(line):
 
 def _dataset(a):
     from uav_tilt_vision.dataset import generate
-    meta = generate(a.out, a.n, a.seed, a.split, a.jobs)
-    return {k: meta[k] for k in ('seed', 'split', 'n', 'classes', 'boxes_per_class')}
+    meta = generate(a.out, a.n, a.seed, a.split, a.jobs, renderer=a.renderer)
+    return {k: meta[k] for k in ('seed', 'split', 'n', 'classes', 'boxes_per_class',
+                                 'renderer')}
 
 
 def _train(a):
@@ -77,6 +78,8 @@ def parser():
     d.add_argument('--seed', type=int, default=0)
     d.add_argument('--split', choices=('train', 'heldout'), default='train')
     d.add_argument('--jobs', type=int, default=1, help='render processes')
+    d.add_argument('--renderer', choices=('gl', 'tiny'), default='gl',
+                   help="the camera's renderer (train on the plant's: gl)")
     d.set_defaults(run=_dataset)
     t = sub.add_parser('train', help='train the fp32 detector; writes weights + model card')
     t.add_argument('--data', required=True)
@@ -84,8 +87,9 @@ def parser():
     t.add_argument('--epochs', type=int, default=16)
     t.add_argument('--seed', type=int, default=0)
     t.add_argument('--width-mult', type=float, default=0.5)
-    t.add_argument('--scales', type=int, default=3, choices=(2, 3),
-                   help='detection heads: 2 = YOLOv3-tiny, 3 = with a stride-8 head')
+    t.add_argument('--scales', type=int, default=3, choices=(2, 3, 4),
+                   help='detection heads: 2 = YOLOv3-tiny, 3 = with a stride-8 head, '
+                        '4 = and a stride-4 head')
     t.add_argument('--batch', type=int, default=16)
     t.add_argument('--lr', type=float, default=3e-3)
     t.add_argument('--device', default='auto')

@@ -9,7 +9,7 @@ The objectness target of a positive cell is its detached, clamped CIoU (YOLOv5),
 makes the score reflect localisation quality, useful for NMS and mAP.
 
 Target assignment: each ground truth box goes to the grid cell holding its centre
-for every anchor (over both scales) whose shape IoU with it exceeds ``anchor_iou``,
+for every anchor (over all scales) whose shape IoU with it exceeds ``anchor_iou``,
 and always to its single best anchor, as in YOLOv3. Ignore regions (target rows of class
 ``IGNORE_CLASS``: objects in view but too little visible to label) take no part in the
 assignment; the cells that could predict them, those whose centre lies inside one and the
@@ -81,12 +81,12 @@ class YoloLoss(nn.Module):
     """Callable ``loss(heads, targets) -> (total, {'box', 'obj', 'cls'})``."""
 
     def __init__(self, anchors, anchor_iou=0.25, box_gain=0.05, obj_gain=1.0,
-                 cls_gain=0.5, balance=(1.0, 1.0, 1.0)):
+                 cls_gain=0.5, balance=None):
         super().__init__()
         self.register_buffer('anchors', torch.as_tensor(anchors, dtype=torch.float32))
         self.anchor_iou = anchor_iou
         self.gains = (box_gain, obj_gain, cls_gain)
-        self.balance = balance
+        self.balance = balance or (1.0,) * len(self.anchors)   # objectness weight per scale
         self.bce = nn.BCEWithLogitsLoss()
 
     def forward(self, heads, targets):
