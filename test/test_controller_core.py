@@ -81,9 +81,8 @@ def test_ground_truth_is_ignored_with_vision_and_no_target_frames_are_counted():
     core = ControllerCore(VEHICLE, ControllerConfig(target_source='vision'))
     assert not core.on_ground_truth_target([2.5, 0.0, 1.5], [0.0, 0.0, 0.0, 1.0])
     core.on_odometry(_state(0.0))
-    no_target = np.zeros(36)
-    no_target[0] = -1.0
-    assert not core.on_target_measurement(0.0, np.zeros(3), np.zeros(4), no_target)
+    # a frame without candidates: vision saw no target
+    assert not core.on_target_candidates(0.0, [])
     assert core.estimator.counters['no_target'] == 1
     _, status = core.tick(0.0, np.zeros(3), DT_S)
     assert not status['target_valid'] and status['target_source'] == 'vision'

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from uav_tilt_common.config import ConfigError, from_dict
+from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
-from uav_tilt_sim.world import wall_rotation
 
 SCENARIOS = sorted((pathlib.Path(__file__).parent.parent / 'config' / 'scenarios')
                    .glob('*.yaml'))

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_sim.textures import OBJECT_CLASSES
+from uav_tilt_common.targets import OBJECT_CLASSES
 from uav_tilt_vision.pipeline import VisionConfig, VisionPipeline, check_frame, draw_debug
 from uav_tilt_vision.target_pose import CameraIntrinsics
 

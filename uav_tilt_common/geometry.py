@@ -185,3 +185,21 @@ def matrix_to_euler_zyx(R):
         # gimbal lock: only yaw -+ roll is defined
         return math.atan2(m12 * math.copysign(1.0, -m20), m11), pitch, 0.0
     return math.atan2(m10, m00), pitch, math.atan2(m21, m22)
+
+
+def wall_rotation(yaw_deg, inclination_deg):
+    """R_map_wall of a wall (DESIGN section 5) faced along heading ``yaw`` (from the vehicle
+    to the wall) with its top leaning away by ``inclination``: columns x_W right as seen
+    from in front, y_W up the wall, z_W the outward surface normal."""
+    yaw, inc = math.radians(yaw_deg), math.radians(inclination_deg)
+    facing = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    normal = -math.cos(inc) * facing + np.array([0.0, 0.0, math.sin(inc)])
+    up = math.sin(inc) * facing + np.array([0.0, 0.0, math.cos(inc)])
+    return np.column_stack([cross3(up, normal), up, normal])
+
+
+def wall_point(position_m, yaw_deg, inclination_deg, u_m, v_m):
+    """Map point at (u right, v up) on the surface of a wall whose ground line passes
+    through ``position_m`` (x, y): the scenario's and the plan's wall coordinates."""
+    R = wall_rotation(yaw_deg, inclination_deg)
+    return np.array([position_m[0], position_m[1], 0.0]) + R[:, 0] * u_m + R[:, 1] * v_m

@@ -6,11 +6,12 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
+from sensor_msgs.msg import CameraInfo, Image, Imu, JointState, PointCloud2, PointField
 
 from uav_tilt_common import names
 from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_common.state import VehicleState
+from uav_tilt_common.targets import CANDIDATE_FIELDS, candidates_from_array, candidates_to_array
 
 
 def to_stamp(t_s):
@@ -164,3 +165,33 @@ def _fmt(value):
     if isinstance(value, float):
         return f'{value:.6g}' if math.isfinite(value) else str(value)
     return str(value)
+
+
+def candidates_msg(candidates, stamp, frame_id=names.FRAME_CAMERA):
+    """target/candidates: a PointCloud2 of float32 CANDIDATE_FIELDS, one point each."""
+    rows = candidates_to_array(candidates)
+    msg = PointCloud2()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.height, msg.width = 1, len(rows)
+    msg.fields = [PointField(name=name, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+                  for i, name in enumerate(CANDIDATE_FIELDS)]
+    msg.is_bigendian = False
+    msg.point_step = 4 * len(CANDIDATE_FIELDS)
+    msg.row_step = msg.point_step * len(rows)
+    msg.is_dense = True
+    msg.data = rows.astype('<f4').tobytes()
+    return msg
+
+
+def candidates_of_msg(msg):
+    """The TargetCandidates of a target/candidates message; ValueError when its layout is
+    not :func:`candidates_msg`'s."""
+    names_ = tuple(f.name for f in msg.fields)
+    if names_ != CANDIDATE_FIELDS or any(f.datatype != PointField.FLOAT32 for f in msg.fields) \
+            or msg.point_step != 4 * len(CANDIDATE_FIELDS) \
+            or len(msg.data) != msg.point_step * msg.width * msg.height:
+        raise ValueError(f'unexpected candidate layout: fields {names_}, '
+                         f'point_step {msg.point_step}, {len(msg.data)} bytes')
+    dtype = np.dtype('>f4' if msg.is_bigendian else '<f4')
+    return candidates_from_array(np.frombuffer(bytes(msg.data), dtype=dtype))

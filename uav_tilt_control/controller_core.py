@@ -11,16 +11,44 @@ import dataclasses
 
 import numpy as np
 
-from uav_tilt_common.config import nested, param
-from uav_tilt_common.geometry import quat_multiply, rotvec_to_quat
+from uav_tilt_common.config import ConfigError, nested, param
+from uav_tilt_common.geometry import quat_multiply, rotvec_to_quat, wall_point
 from uav_tilt_common.state import ActuatorCommand, VehicleState
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import frames
 from uav_tilt_control.flight_core import FlightCore, FlightCoreConfig
-from uav_tilt_control.mission import DEFAULT_CONTACT_FORCE_N, Mission, MissionConfig, Mode
+from uav_tilt_control.mission import (DEFAULT_CONTACT_FORCE_N, NEAR_WALL, Mission,
+                                      MissionConfig, Mode)
 from uav_tilt_control.target_estimator import TargetEstimator, TargetEstimatorConfig
 
 TARGET_SOURCES = ('vision', 'ground_truth')
+
+
+@dataclasses.dataclass
+class SiteConfig:
+    """What a drawing or a prior survey of the site says: the wall (the scenario's
+    convention: its ground line through ``wall_position_m``, ``wall_yaw_deg`` the heading
+    towards it, ``wall_inclination_deg`` its top leaning away) and, optionally, roughly
+    where the target is on it (u right, v up, metres; within about 0.3 m)."""
+
+    wall_position_m: list = param([], lo=-1000.0, hi=1000.0)
+    wall_yaw_deg: float = param(0.0, lo=-180.0, hi=180.0)
+    wall_inclination_deg: float = param(0.0, lo=-30.0, hi=30.0)
+    target_hint_uv_m: list = param([], lo=-1000.0, hi=1000.0)
+
+    def target_hint_map(self):
+        """The hint as a map point, or None without one."""
+        for name in ('wall_position_m', 'target_hint_uv_m'):
+            value = getattr(self, name)
+            if value and len(value) != 2:
+                raise ConfigError(f"parameter 'site.{name}' = {value!r} must have 2 elements")
+        if not self.target_hint_uv_m:
+            return None
+        if not self.wall_position_m:
+            raise ConfigError("parameter 'site.target_hint_uv_m' needs 'site.wall_position_m' "
+                              "(the wall the hint is on)")
+        return wall_point(self.wall_position_m, self.wall_yaw_deg, self.wall_inclination_deg,
+                          *self.target_hint_uv_m)
 
 
 @dataclasses.dataclass
@@ -33,6 +61,7 @@ class ControllerConfig:
     flight: FlightCoreConfig = nested(FlightCoreConfig)
     mission: MissionConfig = nested(MissionConfig)
     estimator: TargetEstimatorConfig = nested(TargetEstimatorConfig)
+    site: SiteConfig = nested(SiteConfig)
 
 
 class ControllerCore:
@@ -45,8 +74,10 @@ class ControllerCore:
         self.flight = FlightCore(vehicle, cfg.flight)
         # The mission turns the wanted push into a depth with the impedance law's own K_z.
         k_contact_z = self.flight.impedance.gains(contact=True)[0][2]
-        self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z)
         self.estimator = TargetEstimator(cfg.estimator, *frames.camera_pose_in_base(vehicle))
+        self.estimator.hint_map = cfg.site.target_hint_map()
+        self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z,
+                               drop_target=self.estimator.reset)
         self._odom = None
         self._R_map_base = None     # of the odometry, computed on first use
         self._q_blind = None
@@ -72,18 +103,13 @@ class ControllerCore:
             return
         self._f_contact_map = self._odom_rotation() @ force_ee
 
-    def on_target_measurement(self, stamp_s, p_cam, q_cam_t, covariance):
-        """Vision ``target/pose`` in the camera optical frame; returns True when accepted."""
+    def on_target_candidates(self, stamp_s, candidates):
+        """Vision's ``target/candidates`` of one frame (TargetCandidates in the camera
+        optical frame, the tracked one first); returns True when one was accepted."""
         if self.config.target_source != 'vision':
             return False
-        cov = np.asarray(covariance, dtype=float)
-        if cov.size and cov.ravel()[0] == -1.0:
-            return self.estimator.add_measurement(stamp_s, p_cam, np.eye(3), cov)
-        if not np.all(np.isfinite(q_cam_t)) or np.linalg.norm(q_cam_t) < 0.5:
-            self.estimator.counters['rejected_nonfinite'] += 1
-            return False
-        R_cam_t = frames.quat_matrix(q_cam_t)
-        return self.estimator.add_measurement(stamp_s, p_cam, R_cam_t, cov)
+        return self.estimator.add_candidates(
+            stamp_s, [(c.p_cam, c.n_cam, c.cov_cam) for c in candidates])
 
     def on_ground_truth_target(self, p_map, q_map_t):
         """Evaluation mode only: the true target pose (map); ignored with vision."""
@@ -120,8 +146,11 @@ class ControllerCore:
 
     # ---- the tick ----
 
-    def tick(self, t_s, gyro, dt_s):
-        """One control tick at IMU time ``t_s``; returns (ActuatorCommand, status dict)."""
+    def tick(self, t_s, gyro, dt_s, accel=None):
+        """One control tick at IMU time ``t_s``; returns (ActuatorCommand, status dict).
+
+        ``accel``: the IMU's specific force (base_link, m/s^2), for the disturbance observer.
+        """
         gyro = np.asarray(gyro, dtype=float)
         if self._odom is None or not np.all(np.isfinite(gyro)):
             return self._idle_command(), self._status(t_s, np.inf, {'input_fault': True}, None)
@@ -129,6 +158,8 @@ class ControllerCore:
         if self._ground_truth is not None:
             # the latched pose is re-stamped so the estimate stays valid
             self.estimator.add_ground_truth(t_s, *self._ground_truth)
+        # once the mission flies to a target it never swaps it for a look-alike
+        self.estimator.locked = self.mission.mode in NEAR_WALL
         target = self.estimator.estimate(t_s)
         self.f_normal_n = self._normal_force(target)
         if self.config.autostart == 'inspect' and not self._autostarted:
@@ -147,7 +178,8 @@ class ControllerCore:
         else:
             state = VehicleState(t_s, self._odom.p_map, self._odom.q_map_base,
                                  self._odom.v_map, gyro)
-        command, diagnostics = self.flight.step(state, setpoint, self._f_contact_map, dt_s)
+        command, diagnostics = self.flight.step(state, setpoint, self._f_contact_map, dt_s,
+                                                None if stale else accel)
         return self._bounded(command), self._status(t_s, odom_age_s, diagnostics, target)
 
     # ---- helpers ----

@@ -12,13 +12,13 @@ import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import Imu, JointState, PointCloud2
 from std_srvs.srv import Trigger
 
 from uav_tilt_common import names, ros_msgs, ros_qos
@@ -58,7 +58,7 @@ class ControllerNode(Node):
         sub = ros_qos.quiet_subscription
         sub(self, Odometry, names.ODOM, self.on_odom, q)
         sub(self, WrenchStamped, names.EE_WRENCH, self.on_wrench, q)
-        sub(self, PoseWithCovarianceStamped, names.TARGET_POSE, self.on_target, q)
+        sub(self, PointCloud2, names.TARGET_CANDIDATES, self.on_candidates, q)
         sub(self, PoseStamped, names.SETPOINT_POSE, self.on_setpoint, q)
         if self.cfg.target_source == 'ground_truth':
             sub(self, PoseStamped, names.GROUND_TRUTH_TARGET, self.on_ground_truth,
@@ -122,20 +122,16 @@ class ControllerNode(Node):
                 np.concatenate([force, torque]), 'ee_wrench'):
             self.core.on_wrench(force, torque)
 
-    def on_target(self, msg):
-        """Vision target pose in the camera optical frame (covariance[0] = -1: none)."""
-        if not self._frame_ok(msg, names.FRAME_CAMERA, 'target/pose'):
+    def on_candidates(self, msg):
+        """Vision's target candidates of one frame, camera optical frame (none: no target)."""
+        if not self._frame_ok(msg, names.FRAME_CAMERA, 'target/candidates'):
             return
-        pose = msg.pose.pose
-        p_cam = ros_msgs.vector_of(pose.position)
-        o = pose.orientation
-        q_cam_t = np.array([o.x, o.y, o.z, o.w])
-        cov = np.asarray(msg.pose.covariance, dtype=float)
-        if cov[0] != -1.0 and not self._finite(np.concatenate([p_cam, q_cam_t, cov]),
-                                               'target/pose'):
+        try:
+            candidates = ros_msgs.candidates_of_msg(msg)
+        except ValueError as err:
+            self._reject('layout', f'target/candidates: {err}')
             return
-        self.core.on_target_measurement(ros_msgs.from_stamp(msg.header.stamp), p_cam, q_cam_t,
-                                        cov)
+        self.core.on_target_candidates(ros_msgs.from_stamp(msg.header.stamp), candidates)
 
     def on_ground_truth(self, msg):
         """Evaluation mode: the true target pose in map."""
@@ -183,7 +179,8 @@ class ControllerNode(Node):
         if self.last_stamp_ns is not None and 0 < stamp_ns - self.last_stamp_ns <= MAX_DT_S * 1e9:
             dt_s = (stamp_ns - self.last_stamp_ns) * 1e-9
         self.last_stamp_ns = stamp_ns
-        command, self.status = self.core.tick(stamp_ns * 1e-9, gyro, dt_s)
+        command, self.status = self.core.tick(stamp_ns * 1e-9, gyro, dt_s,
+                                              ros_msgs.vector_of(msg.linear_acceleration))
         self.last_cmd = ros_msgs.actuator_msg(command.thrusts_n,
                                               (command.alpha_rad, command.beta_rad),
                                               msg.header.stamp)

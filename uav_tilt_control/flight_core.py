@@ -16,15 +16,17 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import frames
 from uav_tilt_control.allocation import AllocationConfig, Allocator
 from uav_tilt_control.attitude import AttitudeConfig, AttitudePid, attitude_setpoint
+from uav_tilt_control.disturbance import DisturbanceConfig, DisturbanceObserver
 from uav_tilt_control.impedance import ImpedanceConfig, ImpedanceController
 from uav_tilt_control.types import ImpedanceSetpoint
 
 
 @dataclasses.dataclass
 class FlightCoreConfig:
-    """The impedance, attitude and allocation configs of the flight core."""
+    """The impedance, disturbance, attitude and allocation configs of the flight core."""
 
     impedance: ImpedanceConfig = nested(ImpedanceConfig)
+    disturbance: DisturbanceConfig = nested(DisturbanceConfig)
     attitude: AttitudeConfig = nested(AttitudeConfig)
     allocation: AllocationConfig = nested(AllocationConfig)
 
@@ -36,37 +38,52 @@ class FlightCore:
         self.vehicle = vehicle
         self.config = config or FlightCoreConfig()
         self.impedance = ImpedanceController(vehicle.mass_kg, self.config.impedance)
+        self.disturbance = DisturbanceObserver(vehicle.mass_kg, vehicle.thrust_tau_s,
+                                               self.config.disturbance)
         self.attitude = AttitudePid(vehicle.inertia_kgm2, self.config.attitude)
         self.allocator = Allocator(vehicle, self.config.allocation)
 
     def reset(self):
         """Clear filter and integrator state (e.g. on arming)."""
         self.impedance.reset()
+        self.disturbance.reset()
         self.attitude.reset()
 
     def safe_command(self):
         """Hover thrust at zero tilt: what is sent when the inputs cannot be trusted."""
         return ActuatorCommand(np.full(4, self.vehicle.hover_thrust_n), 0.0, 0.0)
 
-    def step(self, state: VehicleState, setpoint: ImpedanceSetpoint, f_contact_map, dt_s):
-        """One control tick; returns (ActuatorCommand, diagnostics dict)."""
+    def step(self, state: VehicleState, setpoint: ImpedanceSetpoint, f_contact_map, dt_s,
+             specific_force_base=None):
+        """One control tick; returns (ActuatorCommand, diagnostics dict).
+
+        ``specific_force_base``: the IMU's accelerometer (body, m/s^2) for the disturbance
+        observer; without it the observer holds its estimate.
+        """
         if not _inputs_finite(state, setpoint, f_contact_map, dt_s):
             return self.safe_command(), {'input_fault': True, 'saturated': False}
 
-        f_p_map = self.impedance.update(state.p_map, state.v_map, setpoint, f_contact_map, dt_s)
+        R_map_base = frames.quat_matrix(state.q_map_base)
+        if specific_force_base is not None and np.all(np.isfinite(specific_force_base)):
+            self.disturbance.update(R_map_base, specific_force_base, f_contact_map, dt_s)
+        f_p_map = self.impedance.update(state.p_map, state.v_map, setpoint, f_contact_map, dt_s,
+                                        self.disturbance.f_ext_map)
         R_map_base_d, _, _ = attitude_setpoint(f_p_map, setpoint.yaw_rad, setpoint.pitch_rad,
                                                self.config.attitude.roll_limit_rad)
         # Split the force on the attitude actually flown, so the tilt makes the x_FLU part
         # right away while the attitude loop is still converging.
-        f_body = frames.quat_matrix(state.q_map_base).T @ f_p_map
+        f_body = R_map_base.T @ f_p_map
         torque_flu = self.attitude.update(R_map_base_d, state, dt_s)
         result = self.allocator.allocate(f_body[[0, 2]], torque_flu)
+        made_xz = f_body[[0, 2]] - result.force_given_up_n
+        self.disturbance.commanded(R_map_base @ np.array([made_xz[0], 0.0, made_xz[1]]))
         command = ActuatorCommand(result.thrusts_n, result.alpha_rad, result.beta_rad)
         diagnostics = {
             'input_fault': False,
             'saturated': result.saturated,
             'f_p_map': f_p_map,
             'f_contact_map_filtered': self.impedance.f_contact_map.copy(),
+            'f_ext_map': self.disturbance.f_ext_map.copy(),
             'R_map_base_d': R_map_base_d,
             'torque_flu': torque_flu,
             'force_given_up_n': result.force_given_up_n,

@@ -99,11 +99,12 @@ class ImpedanceController:
         """(K, C) diagonals of the contact or free-flight set."""
         return self._gains[bool(contact)]
 
-    def update(self, p_map, v_map, setpoint, f_contact_map, dt_s):
+    def update(self, p_map, v_map, setpoint, f_contact_map, dt_s, f_ext_map=None):
         """F_p in map [N] for the state (p, v in map) and an ``ImpedanceSetpoint``.
 
         ``f_contact_map`` is the measured contact force on the vehicle (map frame); it is
-        low-pass filtered and only used with ``contact_feedforward``.
+        low-pass filtered and only used with ``contact_feedforward``. ``f_ext_map``: the
+        estimated external force (wind; see ``disturbance``), compensated.
         """
         cfg = self.config
         blend = 1.0 - math.exp(-2.0 * math.pi * cfg.contact_cutoff_hz * dt_s)
@@ -127,6 +128,8 @@ class ImpedanceController:
         f_p_map = -f_gravity_map + R_map_t @ (self.mass_kg * accel_t)
         if cfg.contact_feedforward:
             f_p_map -= self.f_contact_map
+        if f_ext_map is not None:
+            f_p_map -= f_ext_map
         return f_p_map
 
     def _estimate_hover(self, e_map, de_map, K_t, contact, dt_s):

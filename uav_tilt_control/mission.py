@@ -55,16 +55,40 @@ class MissionConfig:
     hover_speed_m_s: float = param(0.5, lo=0.05, hi=3.0)
     hover_settle_s: float = param(1.0, lo=0.0, hi=30.0)     # HOVER before SEARCH on inspect
     yaw_rate_rad_s: float = param(0.5, lo=0.05, hi=3.0)
-    search_yaw_rate_rad_s: float = param(0.0, lo=0.0, hi=1.0)  # 0: hover and wait
-    search_timeout_s: float = param(20.0, lo=0.5, hi=600.0)
+    # SEARCH: a full turn at the takeoff altitude, then one more turn search_climb_m higher
+    # (a wider view of a tall wall), until a candidate target is seen; it is confirmed once
+    # confirm_n of its measurements agree within confirm_radius_m. One not confirmed within
+    # confirm_timeout_s is looked at again from confirm_range_m (a small far target is
+    # seen in few frames), then dropped, and the sweep goes on. search_timeout_s in all,
+    # then it lands.
+    search_yaw_rate_rad_s: float = param(0.35, lo=0.0, hi=1.0)  # 0: hover and wait
+    search_climb_m: float = param(0.8, lo=0.0, hi=10.0)
+    search_timeout_s: float = param(75.0, lo=0.5, hi=600.0)
+    confirm_n: int = param(5, lo=1, hi=100)
+    confirm_radius_m: float = param(0.15, lo=0.01, hi=2.0)
+    confirm_timeout_s: float = param(4.0, lo=0.1, hi=60.0)
+    # a candidate seen but not confirmed farther than this is looked at again from here
+    confirm_range_m: float = param(2.5, lo=0.5, hi=20.0)
     standoff_m: float = param(0.6, lo=0.1, hi=5.0)          # tool tip to surface
     approach_speed_m_s: float = param(0.3, lo=0.05, hi=2.0)
     pitch_to_normal: bool = param(True)                     # align the tool with the normal
     max_pitch_rad: float = param(0.5, lo=0.0, hi=1.0)
-    contact_speed_m_s: float = param(0.1, lo=0.01, hi=0.5)  # peak speed of the contact ramp
-    contact_threshold_n: float = param(1.0, lo=0.05, hi=20.0)
-    contact_detect_ticks: int = param(3, lo=1, hi=100)
-    contact_timeout_s: float = param(5.0, lo=0.5, hi=60.0)  # after the ramp, no contact
+    # CONTACT: close in to touch_margin_m before the estimated surface at up to
+    # contact_speed_m_s, creep on at touch_speed_m_s until the F/T feels the wall, then
+    # press: the push ramps up to the setpoint over press_time_s. A vehicle of mass M
+    # arriving at v on a wall of stiffness k meets a peak of about v sqrt(k M): 2.8 N at
+    # 1 cm/s on 50,000 N/m for 1.6 kg, so the touch stays under 1.5x a 5 N setpoint.
+    contact_speed_m_s: float = param(0.2, lo=0.01, hi=0.5)
+    touch_margin_m: float = param(0.05, lo=0.0, hi=0.5)
+    touch_speed_m_s: float = param(0.01, lo=0.001, hi=0.2)
+    touch_overrun_m: float = param(0.1, lo=0.0, hi=1.0)     # creep past the estimate, at most
+    touch_threshold_n: float = param(0.4, lo=0.05, hi=20.0)  # the first touch
+    press_time_s: float = param(2.0, lo=0.1, hi=30.0)
+    # HOLD: the measured push corrects the depth with this time constant, so that a soft
+    # wall (which gives way) still gets the setpoint; 0 disables the correction.
+    force_tau_s: float = param(0.5, lo=0.0, hi=60.0)
+    contact_threshold_n: float = param(1.0, lo=0.05, hi=20.0)  # in contact while pressing
+    contact_detect_ticks: int = param(2, lo=1, hi=100)
     contact_lost_s: float = param(0.1, lo=0.0, hi=5.0)
     hold_time_s: float = param(5.0, lo=0.0, hi=600.0)
     force_limit_n: float = param(15.0, lo=1.0, hi=100.0)
@@ -119,13 +143,78 @@ class MinJerk:
         return p, v, a
 
 
+SEARCH_LEVELS = 2      # full turns: at the takeoff altitude, then search_climb_m higher
+
+
+class SearchState:
+    """Where SEARCH is: its phase, the turn swept so far, the candidate being confirmed."""
+
+    def __init__(self):
+        self.phase = 'sweep'
+        self.level = 0
+        self.swept_rad = 0.0
+        self.resume_phase = 'sweep'
+        self.since_s = 0.0
+        self.ignore_until_s = -math.inf
+        self.agreeing = 0
+        self.moved_closer = False
+        self.position = None
+        self._last_stamp_s = None
+
+    def candidate(self, now_s, target):
+        """Start confirming the target estimate ``target``."""
+        self.resume_phase = self.phase
+        self.phase = 'confirm'
+        self.since_s = now_s
+        self.agreeing = 0
+        self.moved_closer = False
+        self.position = np.asarray(target[0], dtype=float).copy()
+        self._last_stamp_s = None
+
+    def observe(self, now_s, target, radius_m):
+        """Count a new measurement of the candidate (a newer stamp) that agrees with the one
+        before; one elsewhere starts the count again from there."""
+        stamp = now_s - target[2]
+        if self._last_stamp_s is not None and stamp <= self._last_stamp_s + 1e-9:
+            return
+        self._last_stamp_s = stamp
+        if np.linalg.norm(np.asarray(target[0]) - self.position) > radius_m:
+            self.agreeing = 0
+        self.position = np.asarray(target[0], dtype=float).copy()
+        self.agreeing += 1
+
+
+class Ramp:
+    """Constant-velocity segment from p0 along ``velocity`` for at most ``duration`` s (the
+    guarded move of a touch); same interface as :class:`MinJerk`."""
+
+    def __init__(self, t0_s, p0, velocity, duration):
+        self.t0_s = t0_s
+        self.T = float(duration)
+        self._p0 = np.asarray(p0, dtype=float).copy()
+        self._v = np.asarray(velocity, dtype=float).copy()
+        self.p1 = self._p0 + self._v * self.T
+
+    def done(self, t_s):
+        """True once the segment has run its full length."""
+        return t_s >= self.t0_s + self.T
+
+    def sample(self, t_s):
+        """(p, v, a) at ``t_s``; held at the end point after the end."""
+        if self.done(t_s):
+            return self.p1.copy(), np.zeros(3), np.zeros(3)
+        return self._p0 + self._v * max(t_s - self.t0_s, 0.0), self._v.copy(), np.zeros(3)
+
+
 class Mission:
     """Inspection state machine; call :meth:`update` every control tick."""
 
     def __init__(self, vehicle, config=None, contact_force_n=DEFAULT_CONTACT_FORCE_N,
-                 k_contact_z_n_per_m=None):
+                 k_contact_z_n_per_m=None, drop_target=None):
         """``k_contact_z_n_per_m``: the impedance law's contact K_z, which turns the wanted
-        push into a depth (default: that of the default ImpedanceConfig for the vehicle)."""
+        push into a depth (default: that of the default ImpedanceConfig for the vehicle);
+        ``drop_target()``: makes the target estimate forget a candidate SEARCH did not
+        confirm (the estimator's reset)."""
         self.vehicle = vehicle
         self.config = config or MissionConfig()
         if k_contact_z_n_per_m is None:
@@ -160,6 +249,11 @@ class Mission:
         self._last_tick_s = None
         self._landing_since_s = None
         self._contact_ticks = 0
+        self._contact_phase = ''       # CONTACT: 'close', 'touch', 'press'
+        self._drop_target = drop_target
+        self._search = SearchState()
+        self._depth_correction_m = 0.0  # HOLD: from the push error (along -z_t)
+        self.first_touch_peak_n = 0.0
         self._no_force_since_s = None
         self._in_contact = False
         self._hold_completed = False
@@ -175,10 +269,19 @@ class Mission:
         return self._mode
 
     @property
+    def phase(self):
+        """What the mode is doing: SEARCH 'sweep', 'climb', 'confirm', 'closer'; CONTACT
+        'close', 'touch', 'press'; '' otherwise."""
+        if self._mode == Mode.SEARCH:
+            return self._search.phase
+        return self._contact_phase if self._mode == Mode.CONTACT else ''
+
+    @property
     def status(self):
         """Mode, time in mode, failsafe reason and outcome of the inspection."""
         return dict(
             mode=self._mode.value,
+            phase=self.phase,
             time_in_mode_s=0.0 if self._now_s is None else self._now_s - self._t_mode_s,
             failsafe_reason=self._failsafe_reason,
             inspection_completed=self._hold_completed,
@@ -298,11 +401,59 @@ class Mission:
             self._enter(Mode.SEARCH)
 
     def _tick_search(self, target, f_n, stale):
-        cfg = self.config
-        if self._target_usable(target):
-            self._enter(Mode.APPROACH, target=target)
-        elif self._time_in_mode() > cfg.search_timeout_s:
+        cfg, search = self.config, self._search
+        if self._time_in_mode() > cfg.search_timeout_s:
             self._failsafe('target_not_found', Mode.LAND)
+        elif search.phase in ('confirm', 'closer'):
+            self._tick_confirm(target)
+        elif self._target_usable(target) and self._now_s >= search.ignore_until_s:
+            search.candidate(self._now_s, target)
+            self._event('candidate target')
+            # face it: the detector sees it best in the middle of the image
+            d = target[0] - self._state.p_map
+            self._yaw_goal = math.atan2(d[1], d[0])
+        elif search.phase == 'sweep' and search.swept_rad >= 2.0 * math.pi:
+            if search.level + 1 < SEARCH_LEVELS:
+                search.level += 1
+                search.phase = 'climb'
+                p = self._ref_map()[0]
+                self._plan(np.array([p[0], p[1], cfg.takeoff_altitude_m + cfg.search_climb_m]),
+                           cfg.climb_speed_m_s)
+                self._event('climbing to search higher')
+            else:
+                self._failsafe('target_not_found', Mode.LAND)
+        elif search.phase == 'climb' and self._arrived():
+            search.phase, search.swept_rad = 'sweep', 0.0
+
+    def _tick_confirm(self, target):
+        """Hold and watch a candidate: confirmed after confirm_n agreeing measurements."""
+        cfg, search = self.config, self._search
+        if search.phase == 'closer':
+            if self._arrived():
+                search.phase, search.since_s = 'confirm', self._now_s
+            return
+        if self._target_usable(target):
+            search.observe(self._now_s, target, cfg.confirm_radius_m)
+            if search.agreeing >= cfg.confirm_n:
+                self._enter(Mode.APPROACH, 'target confirmed', target=target)
+                return
+        if self._now_s - search.since_s <= cfg.confirm_timeout_s:
+            return
+        away = search.position - self._state.p_map
+        away[2] = 0.0
+        distance = float(np.linalg.norm(away))
+        if search.agreeing and not search.moved_closer and \
+                distance > cfg.confirm_range_m + cfg.arrive_tol_m:
+            search.phase, search.moved_closer = 'closer', True
+            p = self._ref_map()[0]
+            self._plan(p + away * (1.0 - cfg.confirm_range_m / distance), cfg.hover_speed_m_s)
+            self._event('closer to the candidate')
+            return
+        if self._drop_target is not None:
+            self._drop_target()
+        # turn on for a while before looking at candidates again
+        search.phase, search.ignore_until_s = search.resume_phase, self._now_s + 1.5
+        self._event('candidate dropped')
 
     def _tick_approach(self, target, f_n, stale):
         if self._check_target_lost():
@@ -316,19 +467,68 @@ class Mission:
         cfg = self.config
         if not self._tool_hides_poi() and self._check_target_lost():
             return
-        self._track_target(target)
-        self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.contact_threshold_n else 0
-        # HOLD starts once the push has reached its depth, so it holds the wanted force
-        if self._contact_ticks >= cfg.contact_detect_ticks and self._traj.done(self._now_s):
-            self._enter(Mode.HOLD)
-        elif self._now_s > self._traj.t0_s + self._traj.T + cfg.contact_timeout_s:
-            self._failsafe('no_contact', Mode.RETREAT)
+        if self._contact_phase != 'press':
+            # once pressing, the touch point is where the wall is: the frame stays put
+            self._track_target(target)
+        phase = self._contact_phase
+        if phase == 'close' and self._traj.done(self._now_s):
+            self._start_touch()
+        elif phase == 'close' and f_n > cfg.touch_threshold_n:
+            self._start_press()      # the wall is nearer than estimated
+        elif phase == 'touch':
+            self.first_touch_peak_n = max(self.first_touch_peak_n, f_n)
+            self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.touch_threshold_n else 0
+            if self._contact_ticks >= cfg.contact_detect_ticks:
+                self._start_press()
+            elif self._traj.done(self._now_s):
+                self._failsafe('no_contact', Mode.RETREAT)
+        elif phase == 'press':
+            self.first_touch_peak_n = max(self.first_touch_peak_n, f_n)
+            self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.contact_threshold_n else 0
+            # HOLD starts once the push has reached its depth, so it holds the wanted force
+            if self._contact_ticks >= cfg.contact_detect_ticks and self._traj.done(self._now_s):
+                self._enter(Mode.HOLD)
+            elif self._now_s > self._traj.t0_s + self._traj.T + cfg.press_time_s:
+                self._failsafe('no_contact', Mode.RETREAT)
+
+    def _start_touch(self):
+        """Creep along -z_t from where the close-in ended until the F/T feels the wall."""
+        cfg = self.config
+        self._contact_phase = 'touch'
+        self._contact_ticks = 0
+        p, _ = self._ref_t()
+        self._traj = Ramp(self._now_s, p, [0.0, 0.0, -cfg.touch_speed_m_s],
+                          (cfg.touch_margin_m + cfg.touch_overrun_m) / cfg.touch_speed_m_s)
+        self._event('touching')
+
+    def _start_press(self):
+        """Ramp the depth that pushes with the setpoint, from one that holds the tool on the
+        wall with ``contact_threshold_n`` at once (so that a stiff wall's rebound does not
+        carry it off)."""
+        cfg = self.config
+        self._contact_phase = 'press'
+        self._contact_ticks = 0
+        k_z = self.k_contact_z_n_per_m
+        final = contact_depth_for_force(self.contact_force_n, k_z)
+        start = min(contact_depth_for_force(cfg.contact_threshold_n, k_z), final)
+        # the wall is where it stopped the vehicle (the reference runs ahead while it creeps)
+        touch_z = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)[2]
+        p0, goal = np.array([0.0, 0.0, touch_z - start]), np.array([0.0, 0.0, touch_z - final])
+        distance = float(np.linalg.norm(goal - p0))
+        self._traj = MinJerk(self._now_s, p0, goal,
+                             max(_MIN_JERK_PEAK * distance / cfg.press_time_s, 1e-3))
+        self._event('pressing')
 
     def _tick_hold(self, target, f_n, stale):
         cfg = self.config
         if f_n > cfg.contact_threshold_n:
             self._no_force_since_s = None
             self._in_contact = True
+            if cfg.force_tau_s > 0.0 and self._last_tick_s is not None:
+                # d(push)/d(depth) is K_z on a rigid wall and less on one that gives way
+                dt = self._now_s - self._last_tick_s
+                self._depth_correction_m += ((self.contact_force_n - f_n) * dt
+                                             / (self.k_contact_z_n_per_m * cfg.force_tau_s))
         elif self._no_force_since_s is None:
             self._no_force_since_s = self._now_s
         elif self._in_contact and self._now_s - self._no_force_since_s > cfg.contact_lost_s:
@@ -375,10 +575,10 @@ class Mission:
 
     def _enter(self, mode, reason='', target=None):
         cfg = self.config
-        old = self._mode
+        old, old_phase = self._mode, self.phase
         self._mode = mode
         self._t_mode_s = self._now_s
-        self._event(reason, old)
+        self._event(reason, old, old_phase, target)
         self._contact_gains = mode in (Mode.CONTACT, Mode.HOLD) or (
             mode == Mode.TARGET_LOST and self._contact_gains)
         if mode == Mode.TAKEOFF:
@@ -390,14 +590,18 @@ class Mission:
             self._to_map()
             self._plan(self._ref_map()[0], cfg.hover_speed_m_s)
             self._yaw_goal = self._yaw_ref
+            if mode == Mode.SEARCH:
+                self._search = SearchState()
         elif mode == Mode.APPROACH:
             ref_map = self._ref_map()
             self._set_target_frame(target)
             self._plan_t(self._standoff_t(), cfg.approach_speed_m_s, ref_map)
         elif mode == Mode.CONTACT:
             self._contact_ticks = 0
-            depth = contact_depth_for_force(self.contact_force_n, self.k_contact_z_n_per_m)
-            self._plan_t(np.array([0.0, 0.0, self.vehicle.tool_tip_x_m - depth]),
+            self._contact_phase = 'close'
+            self._depth_correction_m = 0.0
+            self.first_touch_peak_n = 0.0
+            self._plan_t(np.array([0.0, 0.0, self.vehicle.tool_tip_x_m + cfg.touch_margin_m]),
                          cfg.contact_speed_m_s)
         elif mode == Mode.HOLD:
             self._in_contact = True
@@ -415,9 +619,15 @@ class Mission:
             self._yaw_goal = self._yaw_ref
             self._pitch = 0.0
 
-    def _event(self, reason, old=None):
+    def _event(self, reason, old=None, old_phase='', target=None):
+        """Log a transition from ``old`` (in ``old_phase``), or an event within a mode; with
+        the target's POI (map) when it is about one."""
         self.events.append(dict(t_s=self._now_s, mode=self._mode.value,
-                                previous=None if old is None else old.value, reason=reason))
+                                previous=None if old is None else old.value,
+                                phase=old_phase if old is not None else self.phase,
+                                reason=reason,
+                                target_map=None if target is None else
+                                [float(v) for v in target[0]]))
 
     def _failsafe(self, reason, mode):
         self._failsafe_reason = reason
@@ -482,10 +692,17 @@ class Mission:
         p, v = self._ref_map()
         self._R_map_t, self._origin_map = np.eye(3), np.zeros(3)
         self._traj = MinJerk(self._now_s, p, p, 1.0, v)
+        self._depth_correction_m = 0.0      # now part of the new segment
 
     def _ref_t(self):
-        p, v, _ = self._traj.sample(self._now_s)
+        p, v, _ = self._sample()
         return p, v
+
+    def _sample(self):
+        """(p, v, a) of the reference in frame t now, HOLD's depth correction included."""
+        p, v, a = self._traj.sample(self._now_s)
+        p[2] -= self._depth_correction_m
+        return p, v, a
 
     def _ref_map(self):
         p, v = self._ref_t()
@@ -504,6 +721,7 @@ class Mission:
         R, o = self._R_map_t, self._origin_map
         self._traj = MinJerk(self._now_s, frames.to_frame(R, o, p_map), goal_t, v_max,
                              R.T @ v_map)
+        self._depth_correction_m = 0.0      # now part of the new segment
 
     def _arrived(self):
         cfg = self.config
@@ -517,12 +735,17 @@ class Mission:
         cfg = self.config
         dt = 0.0 if self._last_tick_s is None else max(self._now_s - self._last_tick_s, 0.0)
         self._last_tick_s = self._now_s
-        if self._mode == Mode.SEARCH:
+        if self._mode == Mode.SEARCH and self._search.phase == 'sweep':
             self._yaw_goal = self._yaw_ref + cfg.search_yaw_rate_rad_s * dt
+            self._search.swept_rad += cfg.search_yaw_rate_rad_s * dt
         err = frames.wrap_angle(self._yaw_goal - self._yaw_ref)
         step = cfg.yaw_rate_rad_s * dt
         self._yaw_ref = frames.wrap_angle(self._yaw_ref + min(max(err, -step), step))
-        p, v, a = self._traj.sample(self._now_s)
+        p, v, a = self._sample()
+        if self._mode == Mode.CONTACT and self._contact_phase == 'press':
+            # a quasi-static press: with the reference's own speed in C e' + M e'' the push
+            # would overshoot by C times that speed halfway through the ramp
+            v[2] = a[2] = 0.0
         # leaving the wall, the reference starts behind the surface: keep the compliant
         # gains until it is out, so the push fades instead of stiffening
         releasing = self._mode == Mode.RETREAT and p[2] < self.vehicle.tool_tip_x_m

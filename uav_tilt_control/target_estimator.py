@@ -14,6 +14,7 @@ import numpy as np
 
 from uav_tilt_common.config import param
 from uav_tilt_common.geometry import quat_slerp, quat_to_matrix
+from uav_tilt_common.targets import is_no_target
 from uav_tilt_control import frames
 
 
@@ -31,6 +32,7 @@ class TargetEstimatorConfig:
     gate_angle_rad: float = param(0.5, lo=0.01, hi=3.2)
     reacquire_n: int = param(10, lo=1, hi=1000)             # consistent rejections to reset
     valid_age_s: float = param(0.5, lo=0.01, hi=10.0)       # estimate older than this: invalid
+    hint_radius_m: float = param(0.4, lo=0.01, hi=5.0)      # first fix this near a hint
 
 
 class TargetEstimate(typing.NamedTuple):
@@ -57,8 +59,18 @@ class TargetEstimator:
         self._n_map = None
         self._stamp_s = None        # stamp of the last accepted measurement
         self._rejected_run = []     # consecutive gated-out measurements in map
+        # Set by the mission: a locked target is never swapped for another object (a look-
+        # alike); the first fix is taken near the hint (map) when there is one.
+        self.locked = False
+        self.hint_map = None
         self.counters = dict(accepted=0, rejected_gate=0, rejected_nonfinite=0,
-                             rejected_no_pose=0, no_target=0, reacquired=0)
+                             rejected_no_pose=0, rejected_hint=0, no_target=0, reacquired=0,
+                             switch_refused=0)
+
+    def reset(self):
+        """Forget the target estimate (a candidate the mission did not confirm)."""
+        self._p_map = self._P = self._n_map = self._stamp_s = None
+        self._rejected_run = []
 
     def add_state(self, state):
         """Record a vehicle state; out-of-order or non-finite states are ignored."""
@@ -98,17 +110,27 @@ class TargetEstimator:
         flat allowed) in the camera frame, or None; covariance[0] == -1 means
         "no target in this frame" (DESIGN section 3). Returns True when accepted.
         """
-        cov = None if covariance is None else np.asarray(covariance, dtype=float).ravel()
-        if cov is not None and cov.size and cov[0] == -1.0:
+        if covariance is not None and is_no_target(covariance):
             self.counters['no_target'] += 1
             return False
         n_cam = np.asarray(n_cam_or_R_cam_t, dtype=float)
         if n_cam.shape == (3, 3):
             n_cam = n_cam[:, 2]
-        p_cam = np.asarray(p_cam, dtype=float)
-        if not (np.isfinite(stamp_s) and np.all(np.isfinite(p_cam)) and np.all(np.isfinite(n_cam))
-                and (cov is None or np.all(np.isfinite(cov)))
-                and np.linalg.norm(n_cam) > 1e-9):
+        return self.add_candidates(stamp_s, [(p_cam, n_cam, covariance)])
+
+    def add_candidates(self, stamp_s, candidates):
+        """All target candidates of one frame, ``(p_cam, n_cam, covariance or None)`` each
+        in the camera optical frame, vision's tracked one first; returns True when one was
+        accepted.
+
+        The one nearest the estimate is taken; before the first fix, the one nearest the
+        hint within ``hint_radius_m``, or without a hint vision's first.
+        """
+        if not candidates:
+            self.counters['no_target'] += 1
+            return False
+        checked = [c for c in candidates if self._finite(stamp_s, *c)]
+        if not checked:
             self.counters['rejected_nonfinite'] += 1
             return False
         pose = self.pose_at(stamp_s)
@@ -116,10 +138,27 @@ class TargetEstimator:
             self.counters['rejected_no_pose'] += 1
             return False
         R_map_cam, p_map_cam = frames.compose(*pose, self._R_base_cam, self._p_base_cam)
-        p_map = p_map_cam + R_map_cam @ p_cam
-        n_map = frames.unit(R_map_cam @ n_cam)
-        R_meas = self._meas_cov_map(cov, R_map_cam)
-        return self._update(stamp_s, p_map, n_map, R_meas)
+        in_map = [p_map_cam + R_map_cam @ np.asarray(c[0], dtype=float) for c in checked]
+        reference = self._p_map if self._p_map is not None else self.hint_map
+        k = 0
+        if reference is not None:
+            k = int(np.argmin([np.linalg.norm(p - reference) for p in in_map]))
+            if self._p_map is None and np.linalg.norm(in_map[k] - reference) \
+                    > self.config.hint_radius_m:
+                self.counters['rejected_hint'] += 1
+                return False
+        _, n_cam, cov = checked[k]
+        n_map = frames.unit(R_map_cam @ np.asarray(n_cam, dtype=float))
+        cov = None if cov is None else np.asarray(cov, dtype=float).ravel()
+        return self._update(stamp_s, in_map[k], n_map, self._meas_cov_map(cov, R_map_cam))
+
+    @staticmethod
+    def _finite(stamp_s, p_cam, n_cam, cov):
+        values = [np.asarray(p_cam, dtype=float), np.asarray(n_cam, dtype=float)]
+        if cov is not None:
+            values.append(np.asarray(cov, dtype=float).ravel())
+        return bool(np.isfinite(stamp_s) and all(np.all(np.isfinite(v)) for v in values)
+                    and np.linalg.norm(values[1]) > 1e-9)
 
     def add_ground_truth(self, stamp_s, p_poi_map, n_map_or_R_map_t):
         """Evaluation mode: take a ground-truth target pose in map as the estimate."""
@@ -201,6 +240,11 @@ class TargetEstimator:
             run.clear()
         run.append(p_map)
         if len(run) >= self.config.reacquire_n:
+            if self.locked:
+                # another object where the target was: a look-alike, never a switch
+                self.counters['switch_refused'] += 1
+                run.clear()
+                return
             self._reset(stamp_s, p_map, n_map, R_meas)
             self.counters['reacquired'] += 1
 

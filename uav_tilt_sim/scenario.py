@@ -3,8 +3,7 @@ import dataclasses
 import pathlib
 
 from uav_tilt_common.config import ConfigError, load_yaml, nested, param
-
-OBJECT_CLASSES = ('bolt_plate', 'gauge', 'hazard_sign')
+from uav_tilt_common.targets import OBJECT_CLASSES
 
 DEFAULT_SCENARIO = pathlib.Path(__file__).resolve().parent.parent / 'config' / 'scenarios' \
     / 'default.yaml'

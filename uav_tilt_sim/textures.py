@@ -6,8 +6,9 @@ wall), column 0 = left when looking at the wall. Textures are HxWx3 uint8 RGB.
 import cv2
 import numpy as np
 
+from uav_tilt_common.targets import OBJECT_CLASSES
+
 OBJECT_SIZE_M = 0.20
-OBJECT_CLASSES = ('bolt_plate', 'gauge', 'hazard_sign')
 # Normalised texture coordinates (u = column / width, v = row / height) of the POI.
 POI_UV = {'bolt_plate': (0.5, 0.5)}
 # Bolt head across-corners diameter as a fraction of the plate side.

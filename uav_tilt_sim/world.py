@@ -5,6 +5,7 @@ import numpy as np
 import pybullet as p
 from scipy.spatial.transform import Rotation
 
+from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_sim import textures
 from uav_tilt_sim.visuals import QUAD, Visual, create_static_body
 
@@ -43,16 +44,6 @@ class WorldInfo:
     def body_classes(self):
         """PyBullet body id -> object class (for segmentation labels)."""
         return {o.body: o.cls for o in self.objects}
-
-
-def wall_rotation(yaw_deg, inclination_deg):
-    """R_map_wall for a wall faced along heading ``yaw`` with its top leaning away."""
-    yaw, inc = np.radians(yaw_deg), np.radians(inclination_deg)
-    facing = np.array([np.cos(yaw), np.sin(yaw), 0.0])          # from the vehicle to the wall
-    normal = -np.cos(inc) * facing + np.array([0.0, 0.0, np.sin(inc)])
-    up = np.sin(inc) * facing + np.array([0.0, 0.0, np.cos(inc)])
-    right = np.cross(up, normal)
-    return np.column_stack([right, up, normal])
 
 
 def build_world(client, scenario, texture_rng=None, scene=None):

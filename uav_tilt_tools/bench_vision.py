@@ -15,7 +15,7 @@ import torch
 from uav_tilt_common.vehicle import GRAVITY
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_sim.textures import OBJECT_CLASSES
+from uav_tilt_common.targets import OBJECT_CLASSES
 from uav_tilt_vision.backends import OnnxDetector
 from uav_tilt_vision.detector import Detector
 from uav_tilt_vision.pipeline import VisionPipeline

@@ -1,54 +1,79 @@
-"""`uav-tilt campaign --n N --seed S`: the inspection mission over randomised scenarios.
+"""`uav-tilt campaign --n N --seed S`: the inspection mission over a randomised world.
 
-Runs in-process with the same cores as the nodes (uav_tilt_tools.inprocess), spread over
-the CPU cores, and prints JSON (DESIGN section 7): n, successes, success_rate, runs.
-Targets come from ground truth by default; ``--target-source vision`` renders the camera
-and runs the deployed detector pipeline in each run.
+Each run is ``uav-tilt fly`` (uav_tilt_tools.fly, the same cores as the nodes) on one draw
+of :func:`random_draw`, spread over the CPU cores; the JSON (DESIGN section 7) holds n,
+successes, success_rate, its 95% Wilson interval, the failures by reason and one entry per
+run. Targets come from ground truth by default; ``--target-source vision`` renders the
+camera and runs the deployed detector pipeline in each run.
 """
+import collections
 import json
+import math
 import multiprocessing
 import os
 
 import numpy as np
 
 from uav_tilt_common.config import from_dict
-from uav_tilt_control.controller_core import ControllerConfig
-from uav_tilt_sim.scenario import OBJECT_CLASSES, Scenario, check_scenario
+from uav_tilt_tools.fly import jsonable
+from uav_tilt_common.targets import OBJECT_CLASSES
+from uav_tilt_sim.scenario import Scenario, check_scenario
 
-# Randomisation ranges of issue 5 (wall yaw, inclination, gusts, mass mismatch).
-WALL_YAW_DEG = 30.0
-WALL_INCLINATION_DEG = 15.0
-GUST_MAX_M_S = 3.0
-MASS_MISMATCH = 0.10
+# The world a campaign draws from.
+START_YAW_DEG = 180.0         # vehicle heading at takeoff, from the direction to the wall
+WALL_DISTANCE_M = (2.0, 5.0)
+WALL_YAW_DEG = 45.0           # the wall's normal off the line of sight
+WALL_INCLINATION_DEG = 25.0
+TARGET_HEIGHT_M = (0.8, 2.5)
+TARGET_U_M = 1.5              # target within +-1.5 m of the wall's centre line
+STIFFNESS_N_PER_M = (500.0, 50000.0)   # log-uniform
+FRICTION = (0.2, 1.0)
+MEAN_WIND_M_S = 2.0
+GUST_PEAK_M_S = 3.0           # 3-sigma gust excursion
+MASS_MISMATCH = 0.15
+LOOKALIKE_PROB = 0.3          # a second bolt plate; the draw then has a hint (a plan)
+HINT_ERROR_M = 0.3
+DURATION_S = 150.0
 
 
-def random_scenario(seed):
-    """One randomised, validated scenario drawn from ``seed``."""
+def random_draw(seed):
+    """(scenario, hint) of one randomised world: the hint (u, v on the wall, within
+    HINT_ERROR_M of the target) when the wall carries a look-alike of the target, else None."""
     rng = np.random.default_rng(seed)
-    yaw = rng.uniform(-WALL_YAW_DEG, WALL_YAW_DEG)
-    distance = rng.uniform(2.0, 3.2)
-    bearing = np.radians(rng.uniform(-10.0, 10.0))
-    target_u, target_v = rng.uniform(-0.4, 0.4), rng.uniform(1.1, 1.9)
-    others = [c for c in OBJECT_CLASSES if c != 'bolt_plate']
+    distance = rng.uniform(*WALL_DISTANCE_M)
+    bearing = rng.uniform(-np.pi, np.pi)           # where the wall is, seen from the start
+    wall_yaw = np.degrees(bearing) + rng.uniform(-WALL_YAW_DEG, WALL_YAW_DEG)
+    target_u, target_v = rng.uniform(-TARGET_U_M, TARGET_U_M), rng.uniform(*TARGET_HEIGHT_M)
     objects = [dict(cls='bolt_plate', u_m=target_u, v_m=target_v, target=True)]
-    for side in rng.permutation([-1.0, 1.0])[:rng.integers(1, 3)]:
-        objects.append(dict(cls=str(rng.choice(others)),
-                            u_m=target_u + side * rng.uniform(0.45, 0.8),
-                            v_m=rng.uniform(1.0, 2.0)))
-    # Mean wind plus gusts whose 3-sigma excursion stays within GUST_MAX_M_S.
-    gust_std = rng.uniform(0.0, GUST_MAX_M_S / 3.0)
+    taken = [(target_u, target_v)]
+    hint = None
+    if rng.random() < LOOKALIKE_PROB:
+        u, v = _free_spot(rng, taken, 0.8, 1.5)
+        objects.append(dict(cls='bolt_plate', u_m=u, v_m=v))
+        hint = [target_u + rng.uniform(-HINT_ERROR_M, HINT_ERROR_M),
+                target_v + rng.uniform(-HINT_ERROR_M, HINT_ERROR_M)]
+    others = [c for c in OBJECT_CLASSES if c != 'bolt_plate']
+    for _ in range(int(rng.integers(1, 3))):
+        u, v = _free_spot(rng, taken, 0.45, 1.0)
+        objects.append(dict(cls=str(rng.choice(others)), u_m=u, v_m=v))
+    gust_std = rng.uniform(0.0, GUST_PEAK_M_S / 3.0)
     heading = rng.uniform(0.0, 2 * np.pi)
-    mean = rng.uniform(0.0, GUST_MAX_M_S - 3.0 * gust_std)
+    mean = rng.uniform(0.0, MEAN_WIND_M_S)
     data = dict(
         seed=int(seed),
+        start_yaw_deg=float(_wrap_deg(np.degrees(bearing)
+                                      + rng.uniform(-START_YAW_DEG, START_YAW_DEG))),
         wall=dict(position_m=[float(distance * np.cos(bearing)),
                               float(distance * np.sin(bearing))],
-                  yaw_deg=float(yaw),
+                  yaw_deg=float(_wrap_deg(wall_yaw)),
                   inclination_deg=float(rng.uniform(-WALL_INCLINATION_DEG,
-                                                    WALL_INCLINATION_DEG))),
+                                                    WALL_INCLINATION_DEG)),
+                  width_m=6.0,
+                  stiffness_n_per_m=float(np.exp(rng.uniform(*np.log(STIFFNESS_N_PER_M)))),
+                  friction=float(rng.uniform(*FRICTION))),
         objects=objects,
         wind=dict(mean_m_s=[float(mean * np.cos(heading)), float(mean * np.sin(heading)), 0.0],
-                  gust_std_m_s=float(gust_std)),
+                  gust_std_m_s=float(gust_std), gust_tau_s=float(rng.uniform(0.5, 2.0))),
         noise=dict(imu_gyro_rad_s=float(rng.uniform(0, 0.005)),
                    imu_accel_m_s2=float(rng.uniform(0, 0.1)),
                    odom_pos_m=float(rng.uniform(0, 0.002)),
@@ -58,42 +83,53 @@ def random_scenario(seed):
         mismatch=dict(mass_scale=float(rng.uniform(1 - MASS_MISMATCH, 1 + MASS_MISMATCH)),
                       inertia_scale=float(rng.uniform(0.85, 1.15))),
     )
-    return check_scenario(from_dict(Scenario, data))
+    return check_scenario(from_dict(Scenario, data)), hint
+
+
+def _free_spot(rng, taken, min_gap_m, spread_m):
+    """(u, v) on the wall at least ``min_gap_m`` (in u or v) from every taken spot, near the
+    first one; appended to ``taken``."""
+    u0, v0 = taken[0]
+    while True:
+        u = u0 + rng.uniform(-spread_m, spread_m)
+        v = float(np.clip(v0 + rng.uniform(-0.6, 0.6), 0.5, 2.9))
+        if all(max(abs(u - a), abs(v - b)) >= min_gap_m for a, b in taken):
+            taken.append((u, v))
+            return float(u), v
+
+
+def _wrap_deg(angle):
+    return (angle + 180.0) % 360.0 - 180.0
 
 
 def run_one(job):
     """One campaign run (top level so that worker processes can pickle it)."""
     index, seed, target_source, duration_s = job
     # Imported here so that each worker process builds its own physics server.
-    from uav_tilt_sim.plant import PlantCoreConfig
-    from uav_tilt_tools.inprocess import camera_vision, run_mission
-    scenario = random_scenario(seed)
-    config = from_dict(ControllerConfig, {'target_source': target_source})
-    plant_config, vision = PlantCoreConfig(), None
-    if target_source == 'vision':   # the node's deployed model (relative to the repository)
-        from uav_tilt_vision.vision_node import REPO, VisionNodeConfig
-        vision = camera_vision(plant_config, REPO / VisionNodeConfig().model_path)
-    result = run_mission(scenario, config, duration_s=duration_s, plant_config=plant_config,
-                         vision=vision)
-    result.update(index=index, seed=seed, wall_yaw_deg=scenario.wall.yaw_deg,
+    from uav_tilt_tools.fly import fly, site_overrides
+    scenario, hint = random_draw(seed)
+    overrides = site_overrides(scenario, hint) if hint is not None else {}
+    result = fly(scenario, target_source, overrides, duration_s)
+    result.update(index=index, seed=seed, hint_uv_m=hint,
+                  wall_distance_m=float(np.hypot(*scenario.wall.position_m)),
+                  wall_yaw_deg=scenario.wall.yaw_deg,
                   wall_inclination_deg=scenario.wall.inclination_deg,
+                  wall_stiffness_n_per_m=scenario.wall.stiffness_n_per_m,
                   mass_scale=scenario.mismatch.mass_scale)
-    if not result['success']:
-        result['failure'] = failure_reason(result)
     return result
 
 
-def failure_reason(result):
-    """A one-line reason for a failed run."""
-    if result.get('failsafe_reason'):
-        return f"failsafe: {result['failsafe_reason']}"
-    if result.get('contact_lost'):
-        return f"contact lost {result['contact_lost']} times during HOLD"
-    last_mode = result['mode_history'][-1][1] if result.get('mode_history') else 'none'
-    return f'mission did not complete (last mode {last_mode})'
+def wilson_interval(successes, n, z=1.96):
+    """95% Wilson score interval (low, high) of a success rate."""
+    if n == 0:
+        return 0.0, 1.0
+    p = successes / n
+    centre = p + z * z / (2 * n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return (centre - half) / (1 + z * z / n), (centre + half) / (1 + z * z / n)
 
 
-def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=90.0,
+def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=DURATION_S,
              progress=True):
     """Run ``n`` randomised missions; returns the DESIGN section 7 JSON dict."""
     seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=n)
@@ -108,8 +144,12 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=90.
         runs.extend(results)
     runs.sort(key=lambda r: r['index'])
     successes = sum(r['success'] for r in runs)
+    low, high = wilson_interval(successes, n)
+    failures = collections.Counter(f"{r['failure']['reason']} in {r['failure']['mode']}"
+                                   for r in runs if not r['success'])
     return dict(n=n, seed=seed, target_source=target_source, successes=successes,
-                success_rate=successes / n if n else 0.0, runs=runs)
+                success_rate=successes / n if n else 0.0, success_rate_ci95=[low, high],
+                failures=dict(failures), runs=runs)
 
 
 def register(sub):
@@ -118,16 +158,15 @@ def register(sub):
     parser.add_argument('--n', type=int, default=20)
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--workers', type=int, default=None)
-    parser.add_argument('--duration', type=float, default=90.0,
+    parser.add_argument('--duration', type=float, default=DURATION_S,
                         help='simulated seconds allowed per mission')
     parser.add_argument('--target-source', choices=('ground_truth', 'vision'),
                         default='ground_truth',
-                        help='vision: render the camera and run the deployed detector '
-                             '(about 100 s of CPU per run)')
+                        help='vision: render the camera and run the deployed detector')
     parser.set_defaults(func=_run)
 
 
 def _run(args):
     result = campaign(args.n, args.seed, args.workers, args.target_source, args.duration)
-    print(json.dumps(result))
+    print(json.dumps(result, default=jsonable))
     return 0 if result['n'] else 1

@@ -10,6 +10,7 @@ import sys
 COMMAND_MODULES = (
     'uav_tilt_tools.bench',
     'uav_tilt_tools.campaign',
+    'uav_tilt_tools.fly',
     'uav_tilt_vision.vision_cli',
     'uav_tilt_tools.report',
     'uav_tilt_tools.topic_cli',

@@ -21,11 +21,12 @@ from sensor_msgs.msg import Image, JointState
 
 from uav_tilt_common import names, ros_msgs, ros_qos
 from uav_tilt_common.config import param
+from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.frames import camera_pose_in_base
 from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_sim.world import WALL_THICKNESS_M, wall_rotation
+from uav_tilt_sim.world import WALL_THICKNESS_M
 
 try:
     import foxglove

@@ -19,8 +19,8 @@ from uav_tilt_sim.plant import Plant, PlantCoreConfig
 class Flight:
     """A plant and a controller stepped together; keeps a per-tick log.
 
-    ``vision(plant, t_s)`` (optional) returns a list of ``target/pose`` measurements
-    (stamp_s, p_cam, q_cam_t, covariance) to hand to the controller this tick.
+    ``vision(plant, t_s)`` (optional) returns ``(stamp_s, candidates)`` of a frame, as
+    ``target/candidates`` carries them, or None when there is no frame this tick.
     """
 
     def __init__(self, scenario, controller_config=None, vehicle=None, plant_config=None,
@@ -51,11 +51,12 @@ class Flight:
         if self.odometry_enabled:
             core.on_odometry(sensors.odom)
         core.on_wrench(sensors.ee_force_n, sensors.ee_torque_nm)
-        if self.vision is not None:
-            for measurement in self.vision(plant, sensors.t_s):
-                core.on_target_measurement(*measurement)
+        frame = self.vision(plant, sensors.t_s) if self.vision is not None else None
+        if frame is not None:
+            core.on_target_candidates(*frame)
         start = time.perf_counter()
-        command, self.status = core.tick(sensors.t_s, sensors.gyro_rad_s, plant.dt_tick)
+        command, self.status = core.tick(sensors.t_s, sensors.gyro_rad_s, plant.dt_tick,
+                                         sensors.accel_m_s2)
         self.tick_s.append(time.perf_counter() - start)
         truth = plant.state()
         self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
@@ -90,32 +91,58 @@ class Flight:
 
 
 def mission_result(flight, contact_force_n):
-    """Summary of an inspection run (DESIGN section 7 ``summary.json`` names)."""
+    """Summary of an inspection run (DESIGN section 7 ``summary.json`` names), plus the
+    mode history, where a failsafe fired and the first touch's peak push."""
     log = flight.log
     modes = [entry['mode'] for entry in log]
     history = [(log[0]['t_s'], modes[0])] + [
         (log[i]['t_s'], modes[i]) for i in range(1, len(log)) if modes[i] != modes[i - 1]]
     hold = [entry for entry in log if entry['mode'] == Mode.HOLD.value]
     push = np.array([entry['push_n'] for entry in log])
-    poi = flight.plant.world.target_poi_map
+    world = flight.plant.world
+    reason = flight.status.get('failsafe_reason', '')
+    events = flight.core.mission.events
+    fired = [e for e in events if reason and e['reason'] == reason]
+    approached = [e['target_map'] for e in events if e['mode'] == Mode.APPROACH.value
+                  and e['previous'] == Mode.SEARCH.value]
     result = dict(success=bool(flight.status.get('success', False)),
                   contact_lost=int(flight.status.get('contact_lost', 0)),
-                  failsafe_reason=flight.status.get('failsafe_reason', ''),
+                  failsafe_reason=reason,
+                  failsafe_where=({'mode': fired[-1]['previous'], 'phase': fired[-1]['phase']}
+                                  if fired else None),
                   max_force_n=float(push.max()) if push.size else 0.0,
+                  first_touch_peak_n=_first_touch_peak(log, push),
                   mode_history=[(float(t), m) for t, m in history],
                   poi_error_m=None, poi_error_max_m=None, force_mean_n=None,
-                  force_rms_error_n=None, hold_time_s=0.0)
+                  force_rms_error_n=None, hold_time_s=0.0, hold_tip_map=None,
+                  sim_time_s=float(flight.t_s), ticks=len(log),
+                  confirmed_target_map=approached[0] if approached else None)
     landed = [t for t, m in history[1:] if m == Mode.IDLE.value]
     result['mission_time_s'] = float(landed[-1] if landed else log[-1]['t_s'])
-    if hold and poi is not None:
-        errors = np.array([np.linalg.norm(entry['tip_map'] - poi) for entry in hold])
+    if hold and world.target_poi_map is not None:
+        # along the surface: a wall that gives way lets the tip sink in along the normal
+        normal = world.R_map_target[:, 2]
+        offsets = np.array([entry['tip_map'] - world.target_poi_map for entry in hold])
+        errors = np.linalg.norm(offsets - np.outer(offsets @ normal, normal), axis=1)
         hold_push = np.array([entry['push_n'] for entry in hold])
-        result.update(poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()),
+        result.update(hold_tip_map=np.mean([e['tip_map'] for e in hold], axis=0).tolist(),
+                      poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()),
                       force_mean_n=float(hold_push.mean()),
                       force_rms_error_n=float(np.sqrt(np.mean((hold_push - contact_force_n)
                                                               ** 2))),
                       hold_time_s=float(hold[-1]['t_s'] - hold[0]['t_s']))
     return result
+
+
+def _first_touch_peak(log, push, window_s=0.25):
+    """Largest true push within ``window_s`` of the first contact: the impact's transient
+    (a rebound lasts tens of ms, the rotors answer in 25 ms), or None without a contact."""
+    touched = np.nonzero(push > 0.0)[0]
+    if not len(touched):
+        return None
+    t0 = log[touched[0]]['t_s']
+    return float(max(p for e, p in zip(log[touched[0]:], push[touched[0]:])
+                     if e['t_s'] <= t0 + window_s))
 
 
 def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None,
@@ -139,10 +166,8 @@ def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None
 
 class CameraVision:
     """Vision in the loop without ROS: renders the eye-in-hand camera at its rate and runs
-    the VisionPipeline; each frame becomes one ``target/pose`` measurement stamped with the
-    frame time (as vision_node stamps it), "no target" frames included."""
-
-    NO_TARGET_COVARIANCE = np.array([-1.0] + [0.0] * 35)
+    the VisionPipeline; each frame gives its target candidates stamped with the frame time
+    (as vision_node stamps target/candidates), an empty list included."""
 
     def __init__(self, pipeline, camera_rate_hz, control_rate_hz):
         self.pipeline = pipeline
@@ -151,17 +176,14 @@ class CameraVision:
         self.found = 0
 
     def __call__(self, plant, t_s):
-        """Measurements for this tick: one per rendered frame."""
+        """(stamp_s, candidates) of this tick's frame, or None when none is rendered."""
         if plant.tick % self.every:
-            return []
+            return None
         rgb, depth, _ = plant.render()
         result = self.pipeline.process(rgb, depth, t_s)
         self.frames += 1
-        if not result.found:
-            return [(t_s, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]),
-                     self.NO_TARGET_COVARIANCE)]
-        self.found += 1
-        return [(t_s, result.p_cam, result.q_cam, result.covariance.ravel())]
+        self.found += int(result.found)
+        return t_s, result.candidates
 
 
 def camera_vision(plant_config, model_path, backend='auto', vision_config=None):

@@ -203,6 +203,25 @@ def postprocess(det, conf_thres, iou_thres, max_det, scale, pad, orig_shape):
     return np.concatenate([xyxy, score[idx, None], cls[idx, None]], 1).astype(np.float32)
 
 
+def grow_scales(model, scales, extra_anchors):
+    """A ``scales``-head copy of ``model`` that keeps its weights and anchors; the new finer
+    heads (anchors ``extra_anchors``, one (A, 2) set per new head) start untrained."""
+    have = len(model.strides)
+    extra_anchors = np.asarray(extra_anchors, dtype=np.float64).reshape(scales - have, -1, 2)
+    widths = [max(8, int(round(c * model.width_mult / 8)) * 8)
+              for pair in EXTRA_SCALE_CHANNELS[have - 2:scales - 2] for c in pair]
+    anchors = np.concatenate([model.anchors.cpu().numpy(), extra_anchors])
+    grown = Detector(model.num_classes, model.width_mult, model.channels() + widths, anchors,
+                     model.img_size, scales)
+    state = {k: v for k, v in model.state_dict().items() if k != 'anchors'}
+    missing, unexpected = grown.load_state_dict(state, strict=False)
+    new = {f'c{i}' for i in range(2 * have + 7, 2 * scales + 7)} | {
+        f'head{k}' for k in range(have, scales)}
+    if unexpected or any(k.split('.')[0] not in new for k in missing if k != 'anchors'):
+        raise ValueError(f'cannot grow {have} to {scales} scales: {unexpected or missing}')
+    return grown
+
+
 def save_model(path, model, meta=None):
     """Save architecture config, weights and a JSON-like ``meta`` dict to ``path``.
 

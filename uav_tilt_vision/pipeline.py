@@ -1,10 +1,13 @@
 """Per-frame vision pipeline of article sec. 3.2: detect, track, POI, target pose. No rclpy.
 
 Every ``detect_every`` frames (and whenever the track is lost or its quality drops) the
-CNN detector picks the highest-scoring target-class box; in between, the KLT tracker
-carries that box. Inside the box the POI (bolt head) is found by morphology, and the
-depth image around it gives the 3D point, the surface normal and their covariance in
-the camera optical frame.
+CNN detector runs; of its target-class boxes the one that continues the track (the best
+overlap with the tracked box) is tracked on, else the highest-scoring one; in between,
+the KLT tracker carries that box. Inside each box the POI (bolt head) is found by
+morphology, and the depth image around it gives the 3D point, the surface normal and
+their covariance in the camera optical frame. Every target-class box of a frame with a
+POI is a candidate (the tracked one first), so that the controller can pick the one it
+is after among look-alikes.
 """
 import contextlib
 import dataclasses
@@ -14,12 +17,16 @@ import cv2
 import numpy as np
 
 from uav_tilt_common.config import nested, param
-from uav_tilt_sim.textures import OBJECT_CLASSES
+from uav_tilt_common.targets import OBJECT_CLASSES, TargetCandidate
+from uav_tilt_vision.boxes import box_iou
 from uav_tilt_vision.klt_tracker import KltBoxTracker, KltConfig
 from uav_tilt_vision.poi import find_poi
 from uav_tilt_vision.target_pose import estimate_target_pose, pose_quaternion_from_normal
 
 STAGES = ('detector', 'tracker', 'poi', 'pose')
+MAX_CANDIDATES = 6
+# A detection continues the track when it overlaps the tracked box at least this much.
+TRACK_IOU = 0.3
 
 
 @dataclasses.dataclass
@@ -50,6 +57,7 @@ class FrameResult:
     detected: bool = False          # the detector ran on this frame
     tracked: bool = False           # the box came from the tracker
     track_points: np.ndarray = None  # (N, 2) KLT points after this frame
+    candidates: list = dataclasses.field(default_factory=list)  # TargetCandidates, tracked 1st
     timings_ms: dict = dataclasses.field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
 
 
@@ -63,32 +71,48 @@ class VisionPipeline:
         self.target_class = OBJECT_CLASSES.index(self.config.target_class)
         self.tracker = KltBoxTracker(self.config.klt)
         self._since_detect = self.config.detect_every   # detect on the first frame
+        self._last_box = None       # the tracked box of the frame before
+        self._track_score = 0.0     # the detector's score of the tracked box
 
     def process(self, rgb, depth_m, stamp_s):
         """One frame: uint8 RGB (H, W, 3) and depth (H, W) metres -> :class:`FrameResult`."""
         res = FrameResult(stamp_s)
         gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-        box = self._track(gray, res) if self._since_detect < self.config.detect_every else None
-        if box is None:
-            box = self._detect(rgb, gray, res)
+        boxes = None
+        if self._since_detect < self.config.detect_every:
+            tracked = self._track(gray, res)
+            boxes = None if tracked is None else [(tracked, self._track_score)]
+        if boxes is None:
+            boxes = self._detect(rgb, gray, res)
         self._since_detect += 1
-        if box is None:
+        if not boxes:
             return res
-        res.box_xyxy = box
+        res.box_xyxy = boxes[0][0]
         res.track_points = self.tracker.points
-        with _timer(res, 'poi'):
-            poi = find_poi(rgb, box)
-        if poi is None:
-            return res
-        res.poi_px = poi[:2]
-        with _timer(res, 'pose'):
-            est = estimate_target_pose(poi[0], poi[1], depth_m, self.intrinsics,
-                                       self.config.pose_window_px, self.config.pixel_sigma_px)
-            if est is not None:
-                res.p_cam, n_cam, res.covariance = est
+        for k, (box, score) in enumerate(boxes):
+            est = self._pose_in(rgb, depth_m, box, res, k == 0)
+            if est is None:
+                continue
+            p_cam, n_cam, cov = est
+            res.candidates.append(TargetCandidate(p_cam, n_cam, cov[:3, :3], float(score),
+                                                  self.target_class))
+            if k == 0:
+                res.p_cam, res.covariance = p_cam, cov
                 res.q_cam = pose_quaternion_from_normal(n_cam)
                 res.found = True
         return res
+
+    def _pose_in(self, rgb, depth_m, box, res, tracked):
+        """(p_cam, n_cam, 6x6 covariance) of the POI in ``box``, or None."""
+        with _timer(res, 'poi'):
+            poi = find_poi(rgb, box)
+        if poi is None:
+            return None
+        if tracked:
+            res.poi_px = poi[:2]
+        with _timer(res, 'pose'):
+            return estimate_target_pose(poi[0], poi[1], depth_m, self.intrinsics,
+                                        self.config.pose_window_px, self.config.pixel_sigma_px)
 
     def _track(self, gray, res):
         """The tracked box, or None when lost or of too low quality (then: re-detect)."""
@@ -99,25 +123,36 @@ class VisionPipeline:
         if box is None or quality < self.config.min_track_quality or not _on_image(box, gray):
             return None
         res.tracked = True
+        self._last_box = box
         return box
 
     def _detect(self, rgb, gray, res):
-        """Run the detector; start tracking its best target box. None without one."""
+        """Run the detector; [(box, score)] of its target-class boxes, the one to track
+        first (the track's continuation, else the best); start tracking that one."""
         self._since_detect = 0
         res.detected = self.detector is not None
-        box = None
+        boxes = []
         if self.detector is not None:
             with _timer(res, 'detector'):
                 dets = np.asarray(self.detector.predict(rgb, self.config.conf_thres,
                                                         self.config.iou_thres))
             mine = dets[dets[:, 5].astype(int) == self.target_class] if len(dets) else dets
+            mine = mine[np.argsort(-mine[:, 4])][:MAX_CANDIDATES] if len(mine) else mine
             if len(mine):
-                box = mine[np.argmax(mine[:, 4]), :4].astype(np.float64)
+                first = 0
+                if self._last_box is not None:
+                    overlap = box_iou(self._last_box[None], mine[:, :4].astype(np.float64))[0]
+                    if overlap.max() >= TRACK_IOU:
+                        first = int(np.argmax(overlap))
+                order = [first] + [k for k in range(len(mine)) if k != first]
+                boxes = [(mine[k, :4].astype(np.float64), float(mine[k, 4])) for k in order]
         self.tracker = KltBoxTracker(self.config.klt)    # nothing tracked without a box
-        if box is not None:
+        self._last_box = boxes[0][0] if boxes else None
+        self._track_score = boxes[0][1] if boxes else 0.0
+        if boxes:
             with _timer(res, 'tracker'):
-                self.tracker.init(gray, box)
-        return box
+                self.tracker.init(gray, boxes[0][0])
+        return boxes
 
 
 def check_frame(rgb, depth_m, intrinsics):

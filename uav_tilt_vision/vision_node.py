@@ -3,7 +3,9 @@
 
 Colour and depth are paired by stamp; the newest pair is processed and older ones are
 dropped, never queued (best-effort depth-1 subscriptions). Every processed frame gives
-one `target/pose` stamped like its image (covariance[0] = -1: no target). Without a
+one `target/candidates` (every target-class detection with a point of interest, the
+tracked one first; what the controller flies to) and one `target/pose` (the tracked
+target; covariance[0] = -1: none), both stamped like the image. Without a
 usable model the node keeps running and publishes "no target" for every frame.
 """
 import collections
@@ -17,12 +19,13 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from uav_tilt_common import names, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_common.targets import no_target_covariance
 from uav_tilt_vision.backends import BACKENDS, load_detector
 from uav_tilt_vision.pipeline import STAGES, VisionConfig, VisionPipeline, check_frame, \
     draw_debug
@@ -77,7 +80,7 @@ def pose_msg(result, stamp):
     pose = msg.pose.pose
     if not result.found:
         pose.orientation.w = 1.0
-        msg.pose.covariance[0] = -1.0
+        msg.pose.covariance = no_target_covariance()
         return msg
     pose.position.x, pose.position.y, pose.position.z = (float(v) for v in result.p_cam)
     o = pose.orientation
@@ -103,6 +106,8 @@ class VisionNode(Node):
         self.pipeline = VisionPipeline(detector, None, self.cfg)
         self.pub_pose = ros_qos.quiet_publisher(self, PoseWithCovarianceStamped,
                                                 names.TARGET_POSE, ros_qos.CONTROL)
+        self.pub_candidates = ros_qos.quiet_publisher(self, PointCloud2,
+                                                      names.TARGET_CANDIDATES, ros_qos.CONTROL)
         self.pub_debug = self.create_publisher(Image, names.VISION_DEBUG_IMAGE,
                                                ros_qos.CAMERA_PUB)
         self.pub_status = ros_qos.quiet_publisher(self, DiagnosticArray, names.VISION_STATUS,
@@ -172,6 +177,7 @@ class VisionNode(Node):
             return
         stamp = color_msg.header.stamp
         result = self.pipeline.process(rgb, depth, ros_msgs.from_stamp(stamp))
+        self.pub_candidates.publish(ros_msgs.candidates_msg(result.candidates, stamp))
         self.pub_pose.publish(pose_msg(result, stamp))
         if self.pub_debug.get_subscription_count():
             self.pub_debug.publish(ros_msgs.image_msg(draw_debug(rgb, result), stamp))

@@ -1,0 +1,71 @@
+"""External-force (disturbance) observer: wind and model errors, not the contact force.
+
+Newton in map, with the IMU's specific force f (body frame, gravity excluded):
+
+    M R f = F_thrust + F_contact + F_ext
+
+F_thrust is what the rotors make of the previous commands (the allocated wrench through the
+rotors' first-order lag), F_contact is what the F/T sensor measures, so the residual is the
+force nobody commanded or measured: drag from wind and gusts, a mass error in
+accelerations. Low-pass filtered, it is fed back with the opposite sign by the impedance law,
+so the vehicle holds its reference against wind while the contact force, measured and thus
+not in F_ext, still meets the compliance of eq. (6) (the push stays K_z times the depth).
+"""
+import dataclasses
+import math
+
+import numpy as np
+
+from uav_tilt_common.config import param
+
+
+@dataclasses.dataclass
+class DisturbanceConfig:
+    """Filter and bounds of :class:`DisturbanceObserver` (0 ``tau_s`` disables it)."""
+
+    tau_s: float = param(0.15, lo=0.0, hi=10.0)          # low-pass time constant
+    limit_n: float = param(4.0, lo=0.0, hi=100.0)        # bound of |F_ext| fed back
+    # The vertical share is left to the hover-thrust estimator, which learns a weight error
+    # without the observer's transient mass-times-acceleration errors.
+    axes: list = param([1.0, 1.0, 0.0], lo=0.0, hi=1.0, length=3)   # map x, y, z weights
+
+
+class DisturbanceObserver:
+    """Estimates F_ext [N, map]; call :meth:`update` every tick, read :attr:`f_ext_map`."""
+
+    def __init__(self, mass_kg, thrust_tau_s, config: DisturbanceConfig = None):
+        self.config = config or DisturbanceConfig()
+        self.mass_kg = float(mass_kg)
+        self.thrust_tau_s = float(thrust_tau_s)
+        self._axes = np.asarray(self.config.axes, dtype=float)
+        self.reset()
+
+    def reset(self):
+        """Forget the estimate and the thrust model's state."""
+        self.f_ext_map = np.zeros(3)
+        self._f_thrust_map = None      # what the rotors make now (model)
+        self._f_cmd_map = None         # the last command
+
+    def commanded(self, f_thrust_map):
+        """The thrust force (map) just sent to the actuators."""
+        self._f_cmd_map = np.asarray(f_thrust_map, dtype=float)
+
+    def update(self, R_map_base, specific_force_base, f_contact_map, dt_s):
+        """One tick: the IMU's specific force (body) and the measured contact force (map),
+        both over the tick since the last command. Returns the filtered F_ext (map)."""
+        tau = self.config.tau_s
+        if tau <= 0.0 or self._f_cmd_map is None:
+            return self.f_ext_map
+        if self._f_thrust_map is None:
+            self._f_thrust_map = self._f_cmd_map.copy()
+        # the rotors (and servos) follow the command with a first-order lag
+        lag = 1.0 if self.thrust_tau_s <= 0.0 else 1.0 - math.exp(-dt_s / self.thrust_tau_s)
+        self._f_thrust_map = self._f_thrust_map + lag * (self._f_cmd_map - self._f_thrust_map)
+        measured = self.mass_kg * (np.asarray(R_map_base) @ np.asarray(specific_force_base))
+        residual = (measured - self._f_thrust_map - np.asarray(f_contact_map)) * self._axes
+        self.f_ext_map = self.f_ext_map + (1.0 - math.exp(-dt_s / tau)) * (
+            residual - self.f_ext_map)
+        norm = math.sqrt(self.f_ext_map @ self.f_ext_map)
+        if norm > self.config.limit_n:
+            self.f_ext_map *= self.config.limit_n / norm
+        return self.f_ext_map
