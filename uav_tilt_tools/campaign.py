@@ -70,9 +70,10 @@ def run_one(job):
     scenario = random_scenario(seed)
     config = from_dict(ControllerConfig, {'target_source': target_source})
     plant_config, vision = PlantCoreConfig(), None
-    if target_source == 'vision':   # the node's deployed model (relative to the repository)
-        from uav_tilt_vision.vision_node import REPO, VisionNodeConfig
-        vision = camera_vision(plant_config, REPO / VisionNodeConfig().model_path)
+    if target_source == 'vision':   # the node's deployed model
+        from uav_tilt_common.resources import locate
+        from uav_tilt_vision.vision_node import VisionNodeConfig
+        vision = camera_vision(plant_config, locate(VisionNodeConfig().model_path))
     result = run_mission(scenario, config, duration_s=duration_s, plant_config=plant_config,
                          vision=vision)
     result.update(index=index, seed=seed, wall_yaw_deg=scenario.wall.yaw_deg,
