@@ -164,3 +164,19 @@ def _fmt(value):
     if isinstance(value, float):
         return f'{value:.6g}' if math.isfinite(value) else str(value)
     return str(value)
+
+
+def status_value(text):
+    """A value of :func:`diagnostics_msg` decoded: bool, float, or the string itself."""
+    if text in ('True', 'False'):
+        return text == 'True'
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def diagnostics_values(msg):
+    """{key: decoded value} of the first status of a DiagnosticArray ({} if it has none)."""
+    return {kv.key: status_value(kv.value) for kv in msg.status[0].values} if msg.status \
+        else {}

@@ -27,9 +27,11 @@ TARGET_SOURCES = ('vision', 'ground_truth')
 class ControllerConfig:
     """Controller parameters; the top-level names are DESIGN section 7's."""
 
-    target_source: str = param('vision', choices=TARGET_SOURCES)
-    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0)  # N, along -normal
-    autostart: str = param('', choices=('', 'inspect'))
+    target_source: str = param('vision', choices=TARGET_SOURCES,
+                               doc='where the target comes from (ground_truth: evaluation)')
+    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0, unit='N',
+                                 doc='push along the surface normal during HOLD')
+    autostart: str = param('', choices=('', 'inspect'), doc='mission started by itself')
     flight: FlightCoreConfig = nested(FlightCoreConfig)
     mission: MissionConfig = nested(MissionConfig)
     estimator: TargetEstimatorConfig = nested(TargetEstimatorConfig)
@@ -197,6 +199,7 @@ class ControllerCore:
             target_valid=bool(target is not None and target.valid),
             odom_age_s=float(odom_age_s),
             f_normal_n=self.f_normal_n,
+            contact_force_n=self.mission.contact_force_n,
             saturated=bool(diagnostics.get('saturated', False)),
             input_fault=bool(diagnostics.get('input_fault', False)),
         )

@@ -14,6 +14,7 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.mission import Mode
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
+from uav_tilt_tools.mission_metrics import mission_summary, push_along_normal
 
 
 class Flight:
@@ -60,7 +61,8 @@ class Flight:
         truth = plant.state()
         self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
-                             push_n=self._true_push_n(sensors.in_contact), command=command))
+                             push_n=self._true_push_n(sensors.in_contact),
+                             ft_force_ee_n=sensors.ee_force_n, command=command))
         plant.step(command)
 
     def run(self, duration_s, until=None):
@@ -89,32 +91,23 @@ class Flight:
         return float((R_map_base @ force_ee) @ world.R_map_target[:, 2])
 
 
-def mission_result(flight, contact_force_n):
-    """Summary of an inspection run (DESIGN section 7 ``summary.json`` names)."""
+def mission_result(flight):
+    """Summary of an inspection run: :func:`mission_metrics.mission_summary` of the log
+    (the F/T reading and the truth of each tick), with the failsafe reason and the history
+    of modes."""
     log = flight.log
-    modes = [entry['mode'] for entry in log]
-    history = [(log[0]['t_s'], modes[0])] + [
-        (log[i]['t_s'], modes[i]) for i in range(1, len(log)) if modes[i] != modes[i - 1]]
-    hold = [entry for entry in log if entry['mode'] == Mode.HOLD.value]
-    push = np.array([entry['push_n'] for entry in log])
-    poi = flight.plant.world.target_poi_map
-    result = dict(success=bool(flight.status.get('success', False)),
-                  contact_lost=int(flight.status.get('contact_lost', 0)),
-                  failsafe_reason=flight.status.get('failsafe_reason', ''),
-                  max_force_n=float(push.max()) if push.size else 0.0,
-                  mode_history=[(float(t), m) for t, m in history],
-                  poi_error_m=None, poi_error_max_m=None, force_mean_n=None,
-                  force_rms_error_n=None, hold_time_s=0.0)
-    landed = [t for t, m in history[1:] if m == Mode.IDLE.value]
-    result['mission_time_s'] = float(landed[-1] if landed else log[-1]['t_s'])
-    if hold and poi is not None:
-        errors = np.array([np.linalg.norm(entry['tip_map'] - poi) for entry in hold])
-        hold_push = np.array([entry['push_n'] for entry in hold])
-        result.update(poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()),
-                      force_mean_n=float(hold_push.mean()),
-                      force_rms_error_n=float(np.sqrt(np.mean((hold_push - contact_force_n)
-                                                              ** 2))),
-                      hold_time_s=float(hold[-1]['t_s'] - hold[0]['t_s']))
+    modes = [(entry['t_s'], entry['mode']) for entry in log]
+    history = [modes[0]] + [modes[i] for i in range(1, len(modes))
+                            if modes[i][1] != modes[i - 1][1]]
+    world = flight.plant.world
+    push = ([push_along_normal(quat_to_matrix(e['q_map_base']), e['ft_force_ee_n'],
+                               world.R_map_target) for e in log]
+            if world.R_map_target is not None else [])
+    result = mission_summary(modes, flight.status, [e['t_s'] for e in log], push,
+                             [e['t_s'] for e in log], [e['tip_map'] for e in log],
+                             world.target_poi_map)
+    result.update(failsafe_reason=flight.status.get('failsafe_reason', ''),
+                  mode_history=[(float(t), m) for t, m in history])
     return result
 
 
@@ -132,7 +125,7 @@ def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None
         if not ok:
             raise RuntimeError(f'inspect refused: {message}')
         flight.run(duration_s, until=lambda f: f.core.mission.mode == Mode.IDLE)
-        return mission_result(flight, config.contact_force)
+        return mission_result(flight)
     finally:
         flight.close()
 
