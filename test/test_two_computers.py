@@ -100,7 +100,8 @@ def test_the_mission_with_vision_across_the_link(link, tmp_path, record_property
                 except subprocess.TimeoutExpired:
                     proc.kill()
         received = rx_bytes(cc_ns, cc_dev)
-    logs = {p: (tmp_path / p).read_text()[-3000:] for p in ('flight.log', 'companion.log')}
+    logs = '\n'.join(f'--- {p}\n' + (tmp_path / p).read_text()[-6000:]
+                     for p in ('flight.log', 'companion.log'))
     assert code == 0, logs
     assert 'log time: wall clock' in (tmp_path / 'flight.log').read_text()
     report = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.cli', 'report',

@@ -5,7 +5,7 @@ listens before the plant's first tick when it starts first, as scripts/launch.sh
 other topics are discovered periodically. All are subscribed raw (serialized CDR, no
 decoding), with a QoS matched to their publishers as rosbag2 does
 (:func:`topic_graph.subscription_qos`, resubscribed should a publisher offer less):
-reliable publishers get a reliable subscription, so in lockstep every message is recorded.
+reliable publishers get a reliable subscription (a best-effort one loses frames under load).
 A message's log time is when the recorder got it by the node's clock: sim time (/clock)
 with ``use_sim_time``, as scripts/launch.sh starts it (messages that come before the first
 /clock get the time of that first /clock), else the wall clock. The file is completed on
