@@ -6,6 +6,8 @@ import time
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from ros_graph import start, stop
@@ -107,6 +109,20 @@ def test_realtime_mode_follows_the_wall_clock_and_streams_the_camera(tmp_path, p
         # The vehicle sits on the ground facing the wall 2.5 m ahead.
         centre = depth_m[100:140, 140:180]
         assert np.all((centre > 2.0) & (centre < 2.6))
+
+        # `ros2 param set`: a new rtf is honoured, a start-up-only parameter refused.
+        client = AsyncParameterClient(probe.node, '/uav/plant')
+        assert client.wait_for_services(10.0)
+        future = client.set_parameters([Parameter('rtf', value=2 * RTF),
+                                        Parameter('physics_hz', value=600.0)])
+        assert probe.spin_until(future.done, 10.0)
+        honoured, refused = future.result().results
+        assert honoured.successful and not refused.successful and 'read-only' in refused.reason
+        probe.spin_until(lambda: False, 0.5)
+        wall0, sim0 = time.monotonic(), float(latest_status(probe)['sim_time_s'])
+        probe.spin_until(lambda: False, 3.0)
+        wall1, sim1 = time.monotonic(), float(latest_status(probe)['sim_time_s'])
+        assert sim1 - sim0 == pytest.approx(2 * RTF * (wall1 - wall0), abs=0.3)
     finally:
         code, _ = stop(plant)
     assert code == 0

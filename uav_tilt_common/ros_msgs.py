@@ -195,3 +195,19 @@ def candidates_of_msg(msg):
                          f'point_step {msg.point_step}, {len(msg.data)} bytes')
     dtype = np.dtype('>f4' if msg.is_bigendian else '<f4')
     return candidates_from_array(np.frombuffer(bytes(msg.data), dtype=dtype))
+
+
+def status_value(text):
+    """A value of :func:`diagnostics_msg` decoded: bool, float, or the string itself."""
+    if text in ('True', 'False'):
+        return text == 'True'
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def diagnostics_values(msg):
+    """{key: decoded value} of the first status of a DiagnosticArray ({} if it has none)."""
+    return {kv.key: status_value(kv.value) for kv in msg.status[0].values} if msg.status \
+        else {}

@@ -31,10 +31,10 @@ class SiteConfig:
     towards it, ``wall_inclination_deg`` its top leaning away) and, optionally, roughly
     where the target is on it (u right, v up, metres; within about 0.3 m)."""
 
-    wall_position_m: list = param([], lo=-1000.0, hi=1000.0)
+    wall_position_m: list = param([], lo=-1000.0, hi=1000.0, items=float, unit='m')
     wall_yaw_deg: float = param(0.0, lo=-180.0, hi=180.0)
     wall_inclination_deg: float = param(0.0, lo=-30.0, hi=30.0)
-    target_hint_uv_m: list = param([], lo=-1000.0, hi=1000.0)
+    target_hint_uv_m: list = param([], lo=-1000.0, hi=1000.0, items=float, unit='m')
 
     def target_hint_map(self):
         """The hint as a map point, or None without one."""
@@ -55,9 +55,11 @@ class SiteConfig:
 class ControllerConfig:
     """Controller parameters; the top-level names are DESIGN section 7's."""
 
-    target_source: str = param('vision', choices=TARGET_SOURCES)
-    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0)  # N, along -normal
-    autostart: str = param('', choices=('', 'inspect'))
+    target_source: str = param('vision', choices=TARGET_SOURCES,
+                               doc='where the target comes from (ground_truth: evaluation)')
+    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0, unit='N',
+                                 doc='push along the surface normal during HOLD')
+    autostart: str = param('', choices=('', 'inspect'), doc='mission started by itself')
     flight: FlightCoreConfig = nested(FlightCoreConfig)
     mission: MissionConfig = nested(MissionConfig)
     estimator: TargetEstimatorConfig = nested(TargetEstimatorConfig)
@@ -229,6 +231,7 @@ class ControllerCore:
             target_valid=bool(target is not None and target.valid),
             odom_age_s=float(odom_age_s),
             f_normal_n=self.f_normal_n,
+            contact_force_n=self.mission.contact_force_n,
             saturated=bool(diagnostics.get('saturated', False)),
             input_fault=bool(diagnostics.get('input_fault', False)),
         )

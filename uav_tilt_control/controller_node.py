@@ -40,7 +40,8 @@ class ControllerNodeConfig(ControllerConfig):
     """Parameters of controller_node: the core's, the vehicle model and the status rate."""
 
     vehicle: VehicleParams = nested(VehicleParams)
-    status_rate_hz: float = param(10.0, lo=0.5, hi=50.0)
+    status_rate_hz: float = param(10.0, lo=0.5, hi=50.0,
+                                  doc='controller/status rate (wall clock)')
 
 
 class ControllerNode(Node):

@@ -22,6 +22,8 @@ from uav_tilt_sim.world import build_world
 
 GRAVITY_MAP = np.array([0.0, 0.0, -GRAVITY])
 SERVO_TORQUE_NM = 5.0
+# Random stream of the gusts, beside the sensors' (uav_tilt_sim.sensors.RNG_STREAMS).
+RNG_WIND = 0
 
 
 @dataclasses.dataclass
@@ -96,8 +98,11 @@ class Plant:
         self.rotors = RotorBank(v.thrust_tau_s, v.f_max_n, self.dt_physics)
         self.servos = [Servo(v.servo_bandwidth_hz, v.servo_rate_rad_s, v.tilt_limit_rad,
                              self.dt_physics) for _ in range(2)]
-        self.rng = np.random.default_rng(scenario.seed)
-        self.sensors = SensorModel(scenario.noise, self.rng)
+        # One stream per source of randomness, so that one's draws never shift another's:
+        # the same seed gives the same wind whether the camera renders or not.
+        self._wind_rng = np.random.default_rng([scenario.seed, RNG_WIND])
+        self.sensors = SensorModel(scenario.noise, scenario.seed)
+        self._sensed = None         # (tick, TickSensors) of the last read
         self._gust = np.zeros(3)
         self._gust_decay = np.exp(-self.dt_physics / scenario.wind.gust_tau_s)
         self.tick = 0
@@ -167,6 +172,7 @@ class Plant:
             servo.angle_rad, servo.rate_rad_s = angle, 0.0
             p.resetJointState(self.body, joint, angle, 0.0, physicsClientId=self.client)
         self._truth = None
+        self._sensed = None
 
     def _air_force(self, vel_map):
         """Quadratic drag against the air moving at mean wind + gust."""
@@ -174,7 +180,8 @@ class Plant:
         std = wind.gust_std_m_s
         if std > 0.0:
             a = self._gust_decay
-            self._gust = a * self._gust + std * np.sqrt(1 - a * a) * self.rng.standard_normal(3)
+            self._gust = (a * self._gust
+                          + std * np.sqrt(1 - a * a) * self._wind_rng.standard_normal(3))
         rel = np.asarray(wind.mean_m_s) + self._gust - vel_map
         return wind.drag_n_s2_per_m2 * np.linalg.norm(rel) * rel
 
@@ -219,7 +226,14 @@ class Plant:
         return R.T @ force, R.T @ torque
 
     def read_sensors(self):
-        """Noisy sensor set of the current tick (IMU, odometry, F/T, actuators)."""
+        """Noisy sensor set of the current tick (IMU, odometry, F/T, actuators); reading
+        again in the same tick gives the same set (a sensor samples once a tick)."""
+        if self._sensed is not None and self._sensed[0] == self.tick:
+            return self._sensed[1]
+        self._sensed = (self.tick, self._sample_sensors())
+        return self._sensed[1]
+
+    def _sample_sensors(self):
         truth = self.state()
         accel_map = (truth.v_map - self._prev_v_map) / self.dt_tick
         self._prev_v_map = truth.v_map.copy()

@@ -32,19 +32,32 @@ from uav_tilt_sim.scenario import load_scenario
 RESEND_PERIOD_S = 0.25
 # Free-running ticks one timer callback may step to catch up with the wall clock.
 MAX_CATCH_UP = 10
+# The longest hold_until_recorded keeps the first tick.
+RECORDER_WAIT_S = 30.0
 
 
 @dataclasses.dataclass
 class PlantNodeConfig(PlantCoreConfig):
     """Parameters of plant_node (DESIGN section 7 names are stable)."""
 
-    scenario_file: str = param('')
-    mode: str = param('lockstep', choices=('lockstep', 'realtime'))
-    rtf: float = param(0.0, lo=0.0, hi=1000.0)
-    lockstep_timeout_s: float = param(0.5, lo=0.005, hi=60.0)
-    timeout_failsafe: str = param('cut_thrust', choices=('cut_thrust', 'hold_last'))
-    camera_enabled: bool = param(True)
-    status_rate_hz: float = param(2.0, lo=0.1, hi=50.0)
+    scenario_file: str = param('', doc='scenario YAML; empty: config/scenarios/default.yaml')
+    mode: str = param('lockstep', choices=('lockstep', 'realtime'),
+                      doc='lockstep: wait for each tick\'s command; realtime: follow the clock')
+    rtf: float = param(0.0, lo=0.0, hi=1000.0, doc='target real-time factor, 0 = as fast '
+                       'as possible')
+    lockstep_timeout_s: float = param(0.5, lo=0.005, hi=60.0,
+                                      doc='wall time to wait for a command before failsafe')
+    timeout_failsafe: str = param('cut_thrust', choices=('cut_thrust', 'hold_last'),
+                                  doc='what a lockstep timeout applies')
+    camera_enabled: bool = param(True, doc='render and publish the RGB-D camera')
+    status_rate_hz: float = param(2.0, lo=0.1, hi=50.0, doc='plant/status rate (wall clock)')
+    hold_until_recorded: bool = param(
+        False, doc='lockstep: keep the first tick until every plant topic has a matched '
+        'subscription (a recorder of all of them), at most 30 s of wall time')
+
+
+# Parameters a `ros2 param set` changes while the plant runs; the others are read-only.
+DYNAMIC = ('rtf', 'lockstep_timeout_s', 'timeout_failsafe', 'camera_enabled')
 
 
 class PlantNode(Node):
@@ -52,7 +65,7 @@ class PlantNode(Node):
 
     def __init__(self):
         super().__init__('plant')
-        self.cfg = declare_config(self, PlantNodeConfig)
+        self.cfg = declare_config(self, PlantNodeConfig, DYNAMIC, self._on_parameters)
         scenario = load_scenario(self.cfg.scenario_file or None)
         self.plant = Plant(self.cfg, scenario, warn=self.get_logger().warn)
         self.camera_every = max(1, int(round(self.cfg.control_hz / self.cfg.camera.rate_hz)))
@@ -84,12 +97,14 @@ class PlantNode(Node):
         self.wall_start = time.monotonic()
         self.sim_start = 0.0
         self.last_status = (time.monotonic(), 0.0)
+        self.wall_t0 = time.monotonic()
+        self.holding = self.cfg.hold_until_recorded and self.cfg.mode == 'lockstep'
+        self.held_command = None        # the first command, while holding
         self.in_contact = False
 
         self._publish_target()
         self._publish_tick()
-        period = self.plant.dt_tick / (self.cfg.rtf if self.cfg.rtf > 0 else 1.0)
-        self.tick_timer = self.create_timer(period, self.on_free_tick)
+        self.tick_timer = self.create_timer(self._free_tick_period_s(), self.on_free_tick)
         if self.cfg.mode == 'lockstep':
             self.tick_timer.cancel()
             self.create_timer(0.05, self.on_watchdog)
@@ -97,6 +112,15 @@ class PlantNode(Node):
         self.get_logger().info(
             f'plant up: mode={self.cfg.mode} rtf={self.cfg.rtf} '
             f'scenario={self.cfg.scenario_file or "default"} camera={self.cfg.camera_enabled}')
+
+    def _free_tick_period_s(self):
+        return self.plant.dt_tick / (self.cfg.rtf if self.cfg.rtf > 0 else 1.0)
+
+    def _on_parameters(self, changed):
+        """A new rtf paces from now on: sim and wall time restart their common origin."""
+        if 'rtf' in changed:
+            self.wall_start, self.sim_start = time.monotonic(), self.plant.t_s
+            self.tick_timer.timer_period_ns = int(self._free_tick_period_s() * 1e9)
 
     # --- inputs -------------------------------------------------------------------------
     def on_command(self, msg):
@@ -106,6 +130,9 @@ class PlantNode(Node):
             if self.rejects.reject(result.kind):
                 self.get_logger().warn(f'rejected actuator command ({result.detail}); '
                                        f'{self.rejects.total} rejected so far')
+            return
+        if not self.ever_commanded and not self._recorded():
+            self.held_command = msg     # applied by the watchdog once the recorder listens
             return
         self.stats['commands'] += 1
         self.stats['clamped_commands'] += int(result.clamped)
@@ -128,8 +155,29 @@ class PlantNode(Node):
         self.waiting = False
         self._advance()
 
+    def _recorded(self):
+        """hold_until_recorded: whether every topic a tick publishes has a matched
+        subscription, or the wait is over."""
+        if not self.holding:
+            return True
+        pubs = [self.pub_clock, self.pub_imu, self.pub_odom, self.pub_wrench, self.pub_act,
+                self.pub_gt_odom]
+        if self.cfg.camera_enabled:
+            pubs += [self.pub_rgb, self.pub_depth, self.pub_info]
+        if all(pub.get_subscription_count() for pub in pubs):
+            return True
+        if time.monotonic() - self.wall_t0 < RECORDER_WAIT_S:
+            return False
+        self.get_logger().warn(f'hold_until_recorded: not every topic has a subscriber after '
+                               f'{RECORDER_WAIT_S:.0f} s; starting anyway')
+        self.holding = False
+        return True
+
     def on_watchdog(self):
         """Lockstep wall-clock guard: re-send before the first command, time out after."""
+        if self.held_command is not None and self._recorded():
+            msg, self.held_command = self.held_command, None
+            self.on_command(msg)
         if not self.waiting:
             return
         waited = time.monotonic() - self.wait_started
@@ -227,13 +275,15 @@ class PlantNode(Node):
         self.pub_gt_target.publish(msg)
 
     def on_status(self):
-        """plant/status: real-time factor, lockstep counters, rejected commands, contact."""
+        """plant/status: sim and wall time, real-time factor, lockstep counters, rejected
+        commands, contact."""
         now = time.monotonic()
         last_wall, last_sim = self.last_status
         rtf = (self.plant.t_s - last_sim) / max(now - last_wall, 1e-9)
         self.last_status = (now, self.plant.t_s)
         values = dict(mode=self.cfg.mode, sim_time_s=self.plant.t_s, tick=self.plant.tick,
-                      rtf=rtf, synced=self.synced, rejected_commands=self.rejects.total,
+                      wall_time_s=now - self.wall_t0, rtf=rtf, synced=self.synced,
+                      rejected_commands=self.rejects.total,
                       in_contact=getattr(self, 'in_contact', False), **self.stats)
         values.update({f'rejected_{k}': v for k, v in self.rejects.counts.items()})
         self.pub_status.publish(ros_msgs.diagnostics_msg(
