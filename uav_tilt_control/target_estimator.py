@@ -8,6 +8,7 @@ the position of a static point and an exponential average on the normal.
 import bisect
 import collections
 import dataclasses
+import math
 import typing
 
 import numpy as np
@@ -127,8 +128,10 @@ class TargetEstimator:
         if n_map.shape == (3, 3):
             n_map = n_map[:, 2]
         p_map = np.asarray(p_poi_map, dtype=float)
-        if not (np.isfinite(stamp_s) and np.all(np.isfinite(p_map))
-                and np.all(np.isfinite(n_map)) and np.linalg.norm(n_map) > 1e-9):
+        # called every tick in this mode: plain-float checks (numpy's cost more per call)
+        n = n_map.tolist()
+        if not (all(map(math.isfinite, [stamp_s, *p_map.tolist(), *n]))
+                and math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) > 1e-9):
             self.counters['rejected_nonfinite'] += 1
             return False
         self._reset(stamp_s, p_map, frames.unit(n_map), np.zeros((3, 3)))
