@@ -24,8 +24,9 @@ def declare_config(node, cls):
     return from_dict(cls, values)
 
 
-def run_node(node_factory, args=None):
-    """Create the node, spin it, and shut down cleanly (the ros2/demos pattern).
+def run_node(node_factory, args=None, spin=None):
+    """Create the node, serve it with ``spin(node)`` (default ``rclpy.spin``, see
+    :mod:`uav_tilt_common.spin`) and shut down cleanly (the ros2/demos pattern).
 
     A bad parameter ends the process with exit code 2 and one log line.
     """
@@ -35,7 +36,7 @@ def run_node(node_factory, args=None):
     code = 0
     try:
         node = node_factory()
-        rclpy.spin(node)
+        (spin or rclpy.spin)(node)
     except ConfigError as err:
         print(f'[FATAL] {err}', file=sys.stderr, flush=True)
         code = 2
