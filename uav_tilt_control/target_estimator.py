@@ -67,7 +67,7 @@ class TargetEstimator:
             return
         p_map = np.array(state.p_map, dtype=float)
         q = np.asarray(state.q_map_base, dtype=float)
-        if not (np.isfinite(p_map).all() and np.isfinite(q).all()):
+        if not all(map(math.isfinite, p_map.tolist() + q.tolist())):
             return
         # a unit quaternion: scipy's from_quat normalised it, the slerp needs it
         self._history.append((float(state.t_s), p_map, frames.unit(q)))
