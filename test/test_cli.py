@@ -10,6 +10,8 @@ from ros_graph import REPO
 KEYS = {
     'sim': ('rtf_physics', 'rtf_camera', 'rtf_ros_lockstep'),
     'control': ('tick_us_p50', 'tick_us_p99', 'realtime_rate_hz', 'realtime_jitter_ms_p99'),
+    'graph': ('rtf', 'controller_rate_hz', 'vision_fps', 'vision_latency_ms_p95',
+              'realtime_rtf', 'realtime_controller_rate_hz', 'realtime_jitter_ms_p99'),
 }
 
 
@@ -21,3 +23,7 @@ def test_bench_prints_the_contract_keys(what):
     result = json.loads(out)
     for key in KEYS[what]:
         assert result[key] > 0
+    if what == 'graph':
+        assert set(result['cpu_s_per_sim_s']) == {'plant', 'controller', 'vision'}
+        assert all(v > 0 for v in result['cpu_s_per_sim_s'].values())
+        assert result['realtime_late_commands'] >= 0

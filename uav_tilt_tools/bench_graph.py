@@ -1,22 +1,22 @@
 """``uav-tilt bench graph``: the node graph of the inspection mission, timed.
 
-plant, controller and vision run as processes (as scripts/launch.sh starts them, with the
-config/ parameter files; no recorder) with vision in the loop: the camera at its default
-30 Hz and 320x240, the controller's target from vision, the mission started at once.
-First in lockstep, then in realtime, each for ``sim_s`` of simulated time measured after
-the first second (start-up and discovery excluded). Rates are per second of wall time;
-``cpu_s_per_sim_s`` is each process's CPU time (user + system, all threads, from
-/proc/<pid>/stat) per simulated second.
+The graph is what ``scripts/launch.sh --mission inspect`` starts (plant, controller, vision,
+the mission watcher; no recorder), with vision in the loop: the camera at its default 30 Hz
+and 320x240, the controller's target from vision. First in lockstep, then with
+``--realtime`` (real-time scheduling included where permitted), each for ``sim_s`` of
+simulated time measured after the first second (start-up and discovery excluded). Rates
+are per second of wall time; ``cpu_s_per_sim_s`` is each node's CPU time (user + system,
+all threads, from /proc/<pid>/stat) per simulated second.
 """
 import os
 import signal
 import subprocess
-import sys
 import time
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-NODES = {'plant': 'uav_tilt_sim.plant_node', 'controller': 'uav_tilt_control.controller_node',
-         'vision': 'uav_tilt_vision.vision_node'}
+LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
+# node -> what its command line contains (console script or python -m module)
+NODES = {'plant': 'plant_node', 'controller': 'controller_node', 'vision': 'vision_node'}
 # Simulated seconds before the measurement starts, and the wall-clock limit of each part.
 WARM_UP_S = 1.0
 START_TIMEOUT_S = 120.0
@@ -29,26 +29,21 @@ def cpu_s(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def _start(name, params):
-    cmd = [sys.executable, '-m', NODES[name], '--ros-args', '-r', '__ns:=/uav',
-           '--params-file', os.path.join(REPO, 'config', f'{name}.yaml')]
-    if name != 'plant':
-        cmd += ['-p', 'use_sim_time:=true']
-    for key, value in params.items():
-        cmd += ['-p', f'{key}:={value}']
-    return subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-
-
-def _stop(procs):
-    for proc in procs.values():
-        proc.send_signal(signal.SIGINT)
-    for proc in procs.values():
+def node_pids(parent):
+    """{node: pid} of the graph's nodes among the children of ``parent``."""
+    found = {}
+    for entry in os.listdir('/proc'):
         try:
-            proc.wait(timeout=10.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+            with open(f'/proc/{entry}/stat', encoding='ascii') as stream:
+                ppid = int(stream.read().rsplit(')', 1)[1].split()[1])
+            if ppid != parent:
+                continue
+            with open(f'/proc/{entry}/cmdline', 'rb') as stream:
+                cmdline = stream.read().decode(errors='replace')
+        except (OSError, ValueError, IndexError):
+            continue        # not a process, or gone already
+        found.update({name: int(entry) for name, key in NODES.items() if key in cmdline})
+    return found
 
 
 def run_graph(mode, sim_s):
@@ -58,9 +53,9 @@ def run_graph(mode, sim_s):
 
     from uav_tilt_common import names, ros_qos
 
-    # the controller and vision are listening before the plant starts the clock
-    procs = {'vision': _start('vision', {}),
-             'controller': _start('controller', {'autostart': 'inspect'})}
+    args = [LAUNCH, '--mission', 'inspect'] + (['--realtime'] if mode == 'realtime' else [])
+    launch = subprocess.Popen(args, cwd=REPO, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
     rclpy.init()
     node = rclpy.create_node('bench_graph', namespace='/uav')
     latest = {names.PLANT_STATUS: {}, names.CONTROLLER_STATUS: {}, names.VISION_STATUS: {}}
@@ -71,13 +66,14 @@ def run_graph(mode, sim_s):
                 {kv.key: kv.value for kv in msg.status[0].values}), ros_qos.STATUS)
     plant_status, controller, vision = (latest[t] for t in (
         names.PLANT_STATUS, names.CONTROLLER_STATUS, names.VISION_STATUS))
+    procs = {}
 
     def snapshot():
         return dict(wall=time.monotonic(), sim=float(plant_status['sim_time_s']),
                     ticks=int(controller.get('ticks', 0)),
                     frames=int(vision.get('frames_processed', 0)),
                     late=int(plant_status.get('late_commands', 0)),
-                    cpu={name: cpu_s(proc.pid) for name, proc in procs.items()})
+                    cpu={name: cpu_s(pid) for name, pid in procs.items()})
 
     def spin_until(predicate, timeout_s):
         deadline = time.monotonic() + timeout_s
@@ -87,10 +83,11 @@ def run_graph(mode, sim_s):
             rclpy.spin_once(node, timeout_sec=0.02)
 
     try:
-        spin_until(lambda: 'backend' in vision and 'mode' in controller, START_TIMEOUT_S)
-        procs['plant'] = _start('plant', {'mode': mode, 'status_rate_hz': 10.0})
         spin_until(lambda: float(plant_status.get('sim_time_s', 0.0)) >= WARM_UP_S,
                    START_TIMEOUT_S)
+        procs.update(node_pids(launch.pid))
+        if set(procs) != set(NODES):
+            raise RuntimeError(f'bench graph ({mode}): nodes {sorted(procs)} found')
         first = snapshot()
         spin_until(lambda: float(plant_status['sim_time_s']) >= first['sim'] + sim_s,
                    START_TIMEOUT_S + 20.0 * sim_s)
@@ -101,7 +98,12 @@ def run_graph(mode, sim_s):
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-        _stop(procs)
+        launch.send_signal(signal.SIGINT)      # launch.sh stops every node
+        try:
+            launch.wait(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            launch.kill()
+            launch.wait()
     wall, sim = last['wall'] - first['wall'], last['sim'] - first['sim']
     return dict(rtf=sim / wall, controller_rate_hz=(last['ticks'] - first['ticks']) / wall,
                 vision_fps=(last['frames'] - first['frames']) / wall,
