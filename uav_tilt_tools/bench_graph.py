@@ -50,6 +50,7 @@ def run_graph(mode, sim_s):
     """One run in ``mode`` (lockstep | realtime): the statistics of the measured window."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseWithCovarianceStamped
 
     from uav_tilt_common import names, ros_qos
 
@@ -66,12 +67,16 @@ def run_graph(mode, sim_s):
                 {kv.key: kv.value for kv in msg.status[0].values}), ros_qos.STATUS)
     plant_status, controller, vision = (latest[t] for t in (
         names.PLANT_STATUS, names.CONTROLLER_STATUS, names.VISION_STATUS))
+    # vision publishes one target/pose per processed frame
+    poses = [0]
+    node.create_subscription(PoseWithCovarianceStamped, names.TARGET_POSE,
+                             lambda _: poses.__setitem__(0, poses[0] + 1), ros_qos.CONTROL)
     procs = {}
 
     def snapshot():
         return dict(wall=time.monotonic(), sim=float(plant_status['sim_time_s']),
                     ticks=int(controller.get('ticks', 0)),
-                    frames=int(vision.get('frames_processed', 0)),
+                    frames=poses[0],
                     late=int(plant_status.get('late_commands', 0)),
                     cpu={name: cpu_s(pid) for name, pid in procs.items()})
 
