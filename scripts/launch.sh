@@ -15,7 +15,8 @@
 # controller, vision, recorder, foxglove), e.g. --param controller.contact_force:=4.0.
 # Discovery is local-only unless ROS_AUTOMATIC_DISCOVERY_RANGE is set; ROS_DOMAIN_ID and
 # ROS_STATIC_PEERS pass through. Executables come from .venv/bin, else PATH, else
-# `python -m`.
+# `python -m`. At the end it prints the plant's timing (mode, achieved real-time factor,
+# late commands, dropped ticks).
 set -euo pipefail
 
 usage() { sed -n '4,6p' "${BASH_SOURCE[0]}" | sed 's/^# //'; }
@@ -94,16 +95,37 @@ resolve() {
     fi
 }
 
-# CMD += the ROS arguments of node $1: its parameter file (if any), use_sim_time and the
-# --param values given for it (last, so that they win).
+# CMD += the ROS arguments of node $1: its parameter file (if any), use_sim_time (not for
+# the plant, which owns time, nor for the mission watcher, which only reads status: sim
+# time would cost it a /clock message every control tick) and the --param values given
+# for it (last, so that they win).
 ros_args() {
     local p
     CMD+=(--ros-args -r __ns:=/uav)
     [[ ! -f $CONFIG/$1.yaml ]] || CMD+=(--params-file "$CONFIG/$1.yaml")
-    [[ $1 == plant ]] || CMD+=(-p use_sim_time:=true)
+    [[ $1 == plant || $1 == mission_watch ]] || CMD+=(-p use_sim_time:=true)
     for p in ${PARAMS[@]+"${PARAMS[@]}"}; do
         [[ $p != "$1".* ]] || CMD+=(-p "${p#"$1".}")
     done
+}
+
+# --realtime: the plant and the controller (the 300 Hz loop) and vision run with real-time
+# scheduling (SCHED_FIFO, UAV_TILT_RT_PRIORITY, vision 10 below) where the user may use it,
+# so that other work on the machine does not delay a tick; the kernel keeps 5% of each core
+# for everything else. UAV_TILT_RT_PRIORITY=0 turns it off.
+RT_PRIORITY=${UAV_TILT_RT_PRIORITY:-50}
+rt_ok=0
+if ((realtime && RT_PRIORITY > 0)); then
+    if command -v chrt >/dev/null && chrt -f "$RT_PRIORITY" true 2>/dev/null; then
+        rt_ok=1
+    else
+        log "warning: real-time scheduling not permitted (chrt -f $RT_PRIORITY):" \
+            "the 300 Hz loop shares the cores with everything else"
+    fi
+fi
+# CMD := chrt -f PRIORITY CMD, with --realtime where permitted.
+realtime_priority() {
+    ((!rt_ok)) || CMD=(chrt -f "$1" "${CMD[@]}")
 }
 
 declare -A NAME_OF=() RUNNING=()
@@ -112,9 +134,12 @@ stop_signal=0
 trap 'stop_signal=1' INT TERM
 # Should this script fail, no node outlives it.
 # shellcheck disable=SC2329  # invoked by the EXIT trap
+# The plant writes its timing (real-time factor, late commands, ...) here at exit.
+PLANT_SUMMARY=$(mktemp "${TMPDIR:-/tmp}/uav_tilt_plant.XXXXXX")
 kill_all() {
     local p
     for p in "${!RUNNING[@]}"; do kill -s KILL -- "-$p" 2>/dev/null || true; done
+    rm -f "$PLANT_SUMMARY"
 }
 trap kill_all EXIT
 
@@ -164,6 +189,7 @@ fi
 if ((vision && !vision_only)); then
     resolve vision_node uav_tilt_vision.vision_node
     ros_args vision
+    realtime_priority $((RT_PRIORITY > 10 ? RT_PRIORITY - 10 : 1))
     start vision
 fi
 if ((!vision_only)); then
@@ -171,6 +197,7 @@ if ((!vision_only)); then
     ros_args controller
     [[ -z $target_source ]] || CMD+=(-p "target_source:=$target_source")
     [[ -z $mission ]] || CMD+=(-p "autostart:=$mission")
+    realtime_priority "$RT_PRIORITY"
     start controller
     # The plant owns time: it starts last, so that its first ticks find the others
     # listening.
@@ -180,6 +207,8 @@ if ((!vision_only)); then
     if ((realtime)); then CMD+=(-p mode:=realtime); else CMD+=(-p mode:=lockstep); fi
     # Recorded lockstep runs start once the recorder listens to every plant topic.
     [[ -z $record ]] || CMD+=(-p hold_until_recorded:=true)
+    CMD+=(-p "summary_file:=$PLANT_SUMMARY")
+    realtime_priority "$RT_PRIORITY"
     start plant
 fi
 log "ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0} ROS_AUTOMATIC_DISCOVERY_RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE"
@@ -238,6 +267,7 @@ for pid in "${!NAME_OF[@]}"; do
     log "${NAME_OF[$pid]}: exit code $code"
     [[ $code == 0 ]] || failed=1
 done
+if [[ -s $PLANT_SUMMARY ]]; then log "plant timing: $(<"$PLANT_SUMMARY")"; fi
 if [[ -n $mission && $mission_code != 0 ]]; then
     log 'mission did not succeed'
     failed=1

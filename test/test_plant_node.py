@@ -126,3 +126,36 @@ def test_realtime_mode_follows_the_wall_clock_and_streams_the_camera(tmp_path, p
     finally:
         code, _ = stop(plant)
     assert code == 0
+
+
+def test_realtime_plant_that_cannot_keep_up_says_so(tmp_path, probe):
+    """Asked for 40x the wall clock with the camera on, no host keeps up: sim time slips,
+    the dropped ticks and the achieved factor are reported, a warning is logged, and the
+    summary file has the run's timing. Commands stamped with old ticks count as late."""
+    summary = tmp_path / 'summary.json'
+    plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
+                  params={'mode': 'realtime', 'rtf': 40.0, 'status_rate_hz': 10.0,
+                          'summary_file': str(summary)})
+    try:
+        probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
+        assert probe.spin_until(lambda: 'sim_time_s' in latest_status(probe), 30.0)
+        pub = probe.node.create_publisher(JointState, names.ACTUATORS_CMD, ros_qos.CONTROL)
+        assert probe.spin_until(lambda: pub.get_subscription_count() > 0, 10.0)
+        for _ in range(5):
+            pub.publish(ros_msgs.actuator_msg([0.0] * 4, (0.0, 0.0), ros_msgs.to_stamp(0.0)))
+        assert probe.spin_until(
+            lambda: int(latest_status(probe).get('late_commands', 0)) == 5, 10.0)
+        assert probe.spin_until(lambda: latest_status(probe).get('rtf_mean') not in
+                                (None, 'None'), 10.0)
+        probe.spin_until(lambda: False, 6.0)       # past the first warning period
+        status = latest_status(probe)
+        assert int(status['dropped_ticks']) > 0
+        assert 0.0 < float(status['rtf_mean']) < 40.0
+    finally:
+        code, _ = stop(plant)
+    assert code == 0
+    log = (tmp_path / 'plant.log').read_text()
+    assert 'not keeping up with the wall clock' in log, log
+    timing = json.loads(summary.read_text())
+    assert timing['mode'] == 'realtime' and timing['late_commands'] == 5
+    assert timing['dropped_ticks'] > 0 and 0.0 < timing['rtf'] < 40.0

@@ -124,8 +124,9 @@ def _plain(value):
     return list(value) if isinstance(value, (array.array, tuple)) else value
 
 
-def run_node(node_factory, args=None):
-    """Create the node, spin it, and shut down cleanly (the ros2/demos pattern).
+def run_node(node_factory, args=None, spin=None):
+    """Create the node, serve it with ``spin(node)`` (default ``rclpy.spin``, see
+    :mod:`uav_tilt_common.ros_spin`) and shut down cleanly (the ros2/demos pattern).
 
     A bad parameter ends the process with exit code 2 and one log line. Started by
     scripts/launch.sh, the node also ends when the script does (:mod:`parent_watch`).
@@ -137,7 +138,7 @@ def run_node(node_factory, args=None):
     code = 0
     try:
         node = node_factory()
-        rclpy.spin(node)
+        (spin or rclpy.spin)(node)
     except ConfigError as err:
         print(f'[FATAL] {err}', file=sys.stderr, flush=True)
         code = 2

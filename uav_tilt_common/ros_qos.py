@@ -30,8 +30,9 @@ def quiet_publisher(node, msg_type, topic, qos):
         event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
 
-def quiet_subscription(node, msg_type, topic, callback, qos):
-    """A subscription without QoS-event handlers (see :func:`quiet_publisher`)."""
+def quiet_subscription(node, msg_type, topic, callback, qos, raw=False):
+    """A subscription without QoS-event handlers (see :func:`quiet_publisher`); ``raw``:
+    the callback gets the serialized message (bytes)."""
     return node.create_subscription(
-        msg_type, topic, callback, qos,
+        msg_type, topic, callback, qos, raw=raw,
         event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
