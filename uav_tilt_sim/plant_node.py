@@ -29,7 +29,7 @@ from uav_tilt_common import cdr, names, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
-from uav_tilt_common.spin import spin_events
+from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.state import ActuatorCommand
 from uav_tilt_sim.command_check import check_command
 from uav_tilt_sim.plant import Plant, PlantCoreConfig

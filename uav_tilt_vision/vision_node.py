@@ -24,7 +24,7 @@ from uav_tilt_common import names, resources, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
-from uav_tilt_common.spin import spin_events
+from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.targets import no_target_covariance
 from uav_tilt_vision.backends import BACKENDS, load_detector
 from uav_tilt_vision.pipeline import STAGES, VisionConfig, VisionPipeline, check_frame, \
