@@ -38,7 +38,7 @@ class WorldInfo:
     wall_body: int
     ground_body: int
     objects: list[ObjectInstance]
-    wall_visual: Visual | None = None             # the wall's textured face
+    wall_visual: Visual                           # the wall's textured face
     target_poi_map: np.ndarray | None = None      # point of interest on the target's face
     R_map_target: np.ndarray | None = None        # z = surface normal out of the wall
 
