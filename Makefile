@@ -37,4 +37,4 @@ demo: $(STAMP)
 	[ $$launched -eq 0 ] && [ $$reported -eq 0 ]
 
 clean:
-	rm -rf $(VENV) build install log *.egg-info
+	rm -rf $(VENV) build install log *.egg-info .mypy_cache

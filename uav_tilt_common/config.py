@@ -15,7 +15,8 @@ import yaml
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
-C = TypeVar('C', bound='DataclassInstance')
+# a config dataclass: from_dict, load_yaml and declare_config return one of the class given
+ConfigT = TypeVar('ConfigT', bound='DataclassInstance')
 
 
 class ConfigError(ValueError):
@@ -100,7 +101,7 @@ def check_field(name: str, value: Any, default: Any, meta: Mapping[str, Any]) ->
     return _check_scalar(name, value, default, meta)
 
 
-def from_dict(cls: type[C], data: Mapping[str, Any] | None, prefix: str = '') -> C:
+def from_dict(cls: type[ConfigT], data: Mapping[str, Any] | None, prefix: str = '') -> ConfigT:
     """Build and validate config ``cls`` from nested dicts and/or dotted keys."""
     data = _unflatten(data or {})
     if not isinstance(data, dict):
@@ -188,7 +189,8 @@ def replace_flat(cfg: Any, values: Mapping[str, Any]) -> None:
         setattr(target, leaf, value)
 
 
-def load_yaml(cls: type[C], path: str | os.PathLike[str], parameter: str = 'file') -> C:
+def load_yaml(cls: type[ConfigT], path: str | os.PathLike[str],
+              parameter: str = 'file') -> ConfigT:
     """Load and validate config ``cls`` from a plain YAML file; a file that cannot be read
     or parsed is one ConfigError line naming ``parameter``."""
     try:

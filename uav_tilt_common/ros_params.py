@@ -14,8 +14,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from uav_tilt_common import parent_watch
-from uav_tilt_common.config import C, ConfigError, check_field, check_value, description, \
-    fields_flat, from_dict, replace_flat
+from uav_tilt_common.config import ConfigError, ConfigT, check_field, check_value, \
+    description, fields_flat, from_dict, replace_flat
 
 INT64 = (-2**63, 2**63 - 1)
 _ARRAY_TYPES: dict[type | None, Parameter.Type] = {
@@ -23,8 +23,8 @@ _ARRAY_TYPES: dict[type | None, Parameter.Type] = {
     str: Parameter.Type.STRING_ARRAY}
 
 
-def declare_config(node: Node, cls: type[C], dynamic: Iterable[str] = (),
-                   on_change: Callable[[dict[str, Any]], None] | None = None) -> C:
+def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
+                   on_change: Callable[[dict[str, Any]], None] | None = None) -> ConfigT:
     """Declare every field of config ``cls`` as a parameter with a descriptor (description,
     unit, range, choices) and return the validated config.
 
