@@ -1,4 +1,4 @@
-# `make test` and `make bench-sim` create .venv when it is missing; a second run is quick.
+# `make test`, `make lint` and `make bench` create .venv when it is missing; a second run is quick.
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
@@ -18,8 +18,12 @@ $(STAMP): requirements.txt setup.py
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider test
 
+PACKAGES := uav_tilt_common uav_tilt_sim uav_tilt_control uav_tilt_vision uav_tilt_tools
+
+# flake8 over what test/test_lint.py checks, then the type checker (setup.cfg [mypy])
 lint: $(STAMP)
-	$(PY) -m flake8 uav_tilt_common uav_tilt_sim uav_tilt_control uav_tilt_vision uav_tilt_tools test
+	$(PY) -m flake8 $(PACKAGES) test setup.py
+	$(PY) -m mypy $(PACKAGES)
 
 bench: $(STAMP)
 	$(VENV)/bin/uav-tilt bench sim
@@ -33,4 +37,4 @@ demo: $(STAMP)
 	[ $$launched -eq 0 ] && [ $$reported -eq 0 ]
 
 clean:
-	rm -rf $(VENV) build install log *.egg-info
+	rm -rf $(VENV) build install log *.egg-info .mypy_cache

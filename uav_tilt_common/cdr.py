@@ -16,17 +16,20 @@ ValueError on a malformed buffer. Only the fields the cores use are read or writ
 covariances stay zero, as the message objects of :mod:`ros_msgs` leave them.
 """
 import struct
-from typing import NamedTuple
+from typing import Any, Collection, NamedTuple, Sequence
+
+# what a decoder accepts: bytes or a buffer rclpy hands a raw subscription
+Buffer = bytes | bytearray | memoryview
 
 _ENCAPSULATION_LE = b'\x00\x01\x00\x00'
 _ZEROS = bytes(36 * 8)
 
 
-def _pad(n, align):
+def _pad(n: int, align: int) -> int:
     return -n % align
 
 
-def _header(stamp_ns, frame_id):
+def _header(stamp_ns: int, frame_id: str) -> tuple[bytearray, int]:
     """Encapsulation + std_msgs/Header; returns (bytearray, body length)."""
     frame = frame_id.encode()
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
@@ -37,7 +40,7 @@ def _header(stamp_ns, frame_id):
     return out, 12 + len(frame) + 1
 
 
-def _string(out, body_len, text):
+def _string(out: bytearray, body_len: int, text: str) -> int:
     """Append a CDR string (4-aligned uint32 length with the NUL, bytes, NUL)."""
     data = text.encode()
     pad = _pad(body_len, 4)
@@ -45,20 +48,21 @@ def _string(out, body_len, text):
     return body_len + pad + 4 + len(data) + 1
 
 
-def _doubles(out, body_len, values):
+def _doubles(out: bytearray, body_len: int, values: Collection[float]) -> int:
     """Append float64s aligned to 8."""
     pad = _pad(body_len, 8)
     out += bytes(pad) + struct.pack(f'<{len(values)}d', *values)
     return body_len + pad + 8 * len(values)
 
 
-def encode_clock(stamp_ns):
+def encode_clock(stamp_ns: int) -> bytes:
     """rosgraph_msgs/Clock."""
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     return _ENCAPSULATION_LE + struct.pack('<iI', sec, nanosec)
 
 
-def encode_imu(stamp_ns, frame_id, q_xyzw, gyro, accel):
+def encode_imu(stamp_ns: int, frame_id: str, q_xyzw: Collection[float], gyro: Collection[float],
+               accel: Collection[float]) -> bytes:
     """sensor_msgs/Imu: orientation, angular velocity and linear acceleration."""
     out, n = _header(stamp_ns, frame_id)
     zeros9 = _ZEROS[:72]
@@ -68,7 +72,9 @@ def encode_imu(stamp_ns, frame_id, q_xyzw, gyro, accel):
     return bytes(out)
 
 
-def encode_odometry(stamp_ns, frame_id, child_frame_id, p, q_xyzw, v_child, w_child):
+def encode_odometry(stamp_ns: int, frame_id: str, child_frame_id: str, p: Collection[float],
+                    q_xyzw: Collection[float], v_child: Collection[float],
+                    w_child: Collection[float]) -> bytes:
     """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id``."""
     out, n = _header(stamp_ns, frame_id)
     n = _string(out, n, child_frame_id)
@@ -78,14 +84,17 @@ def encode_odometry(stamp_ns, frame_id, child_frame_id, p, q_xyzw, v_child, w_ch
     return bytes(out)
 
 
-def encode_wrench(stamp_ns, frame_id, force, torque):
+def encode_wrench(stamp_ns: int, frame_id: str, force: Collection[float],
+                  torque: Collection[float]) -> bytes:
     """geometry_msgs/WrenchStamped."""
     out, n = _header(stamp_ns, frame_id)
     _doubles(out, n, (*force, *torque))
     return bytes(out)
 
 
-def encode_joint_state(stamp_ns, frame_id, names, position, velocity, effort):
+def encode_joint_state(stamp_ns: int, frame_id: str, names: Sequence[str],
+                       position: Collection[float], velocity: Collection[float],
+                       effort: Collection[float]) -> bytes:
     """sensor_msgs/JointState."""
     out, n = _header(stamp_ns, frame_id)
     pad = _pad(n, 4)
@@ -102,16 +111,17 @@ def encode_joint_state(stamp_ns, frame_id, names, position, velocity, effort):
     return bytes(out)
 
 
-def encode_image(stamp_ns, frame_id, height, width, encoding, step, data, is_bigendian=0):
+def encode_image(stamp_ns: int, frame_id: str, height: int, width: int, encoding: str,
+                 step: int, data: Buffer, is_bigendian: int = 0) -> bytes:
     """sensor_msgs/Image around ``data`` (bytes-like, ``step * height`` bytes)."""
     out, n = _header(stamp_ns, frame_id)
     pad = _pad(n, 4)
     out += bytes(pad) + struct.pack('<II', height, width)
     n = _string(out, n + pad + 8, encoding)
     pad = _pad(n + 1, 4)
-    data = memoryview(data).cast('B')
-    out += struct.pack('<B', is_bigendian) + bytes(pad) + struct.pack('<II', step, len(data))
-    out += data
+    view = memoryview(data).cast('B')
+    out += struct.pack('<B', is_bigendian) + bytes(pad) + struct.pack('<II', step, len(view))
+    out += view
     return bytes(out)
 
 
@@ -128,7 +138,7 @@ class CdrImage(NamedTuple):
     data: memoryview
 
 
-def decode_image(data, max_bytes=64 << 20):
+def decode_image(data: Buffer, max_bytes: int = 64 << 20) -> CdrImage:
     """:class:`CdrImage` of a serialized sensor_msgs/Image."""
     r = _Reader(data)
     stamp_ns, frame_id = r.header()
@@ -148,14 +158,14 @@ class _Reader:
 
     __slots__ = ('data', 'pos', 'order')
 
-    def __init__(self, data):
+    def __init__(self, data: Buffer) -> None:
         if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
             raise ValueError('not a plain CDR encapsulation')
         self.data = data
         self.order = '<' if data[1] == 1 else '>'
         self.pos = 4
 
-    def _take(self, fmt, size, align):
+    def _take(self, fmt: str, size: int, align: int) -> tuple[Any, ...]:
         start = self.pos + _pad(self.pos - 4, align)
         try:
             values = struct.unpack_from(self.order + fmt, self.data, start)
@@ -164,14 +174,14 @@ class _Reader:
         self.pos = start + size
         return values
 
-    def uint32(self):
+    def uint32(self) -> int:
         return self._take('I', 4, 4)[0]
 
-    def doubles(self, count):
+    def doubles(self, count: int) -> tuple[float, ...]:
         # an empty sequence has no elements to align
         return self._take(f'{count}d', 8 * count, 8) if count else ()
 
-    def string(self):
+    def string(self) -> str:
         length = self.uint32()
         end = self.pos + length
         if length == 0 or end > len(self.data) or self.data[end - 1] != 0:
@@ -183,25 +193,26 @@ class _Reader:
         self.pos = end
         return text
 
-    def header(self):
+    def header(self) -> tuple[int, str]:
         """(stamp_ns, frame_id) of a std_msgs/Header."""
         sec, nanosec = self._take('iI', 8, 4)
         return sec * 1_000_000_000 + nanosec, self.string()
 
-    def sequence(self, count_limit):
+    def sequence(self, count_limit: int) -> int:
         count = self.uint32()
         if count > count_limit:
             raise ValueError(f'sequence of {count} elements')
         return count
 
 
-def decode_clock(data):
+def decode_clock(data: Buffer) -> int:
     """stamp_ns of a rosgraph_msgs/Clock."""
     sec, nanosec = _Reader(data)._take('iI', 8, 4)
     return sec * 1_000_000_000 + nanosec
 
 
-def decode_imu(data):
+def decode_imu(data: Buffer) -> tuple[int, str, tuple[float, ...], tuple[float, ...],
+                                      tuple[float, ...]]:
     """(stamp_ns, frame_id, q_xyzw, gyro, accel) of a sensor_msgs/Imu."""
     r = _Reader(data)
     stamp_ns, frame_id = r.header()
@@ -209,7 +220,8 @@ def decode_imu(data):
     return stamp_ns, frame_id, values[0:4], values[13:16], values[25:28]
 
 
-def decode_odometry(data):
+def decode_odometry(data: Buffer) -> tuple[int, str, str, tuple[float, ...], tuple[float, ...],
+                                           tuple[float, ...], tuple[float, ...]]:
     """(stamp_ns, frame_id, child_frame_id, p, q_xyzw, v_child, w_child) of a
     nav_msgs/Odometry."""
     r = _Reader(data)
@@ -219,7 +231,7 @@ def decode_odometry(data):
     return stamp_ns, frame_id, child, values[0:3], values[3:7], values[43:46], values[46:49]
 
 
-def decode_wrench(data):
+def decode_wrench(data: Buffer) -> tuple[int, str, tuple[float, ...], tuple[float, ...]]:
     """(stamp_ns, frame_id, force, torque) of a geometry_msgs/WrenchStamped."""
     r = _Reader(data)
     stamp_ns, frame_id = r.header()
@@ -227,7 +239,9 @@ def decode_wrench(data):
     return stamp_ns, frame_id, values[0:3], values[3:6]
 
 
-def decode_joint_state(data, max_joints=64):
+def decode_joint_state(data: Buffer, max_joints: int = 64
+                       ) -> tuple[int, str, list[str], tuple[float, ...], tuple[float, ...],
+                                  tuple[float, ...]]:
     """(stamp_ns, frame_id, names, position, velocity, effort) of a sensor_msgs/JointState;
     more than ``max_joints`` entries in a sequence is malformed."""
     r = _Reader(data)

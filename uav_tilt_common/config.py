@@ -7,8 +7,16 @@ ROS parameters flattened with dots) and validates it; every failure is one
 """
 import dataclasses
 import math
+import os
+from typing import TYPE_CHECKING, Any, Callable, Mapping, TypeGuard, TypeVar, cast
 
 import yaml
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+# a config dataclass: from_dict, load_yaml and declare_config return one of the class given
+ConfigT = TypeVar('ConfigT', bound='DataclassInstance')
 
 
 class ConfigError(ValueError):
@@ -24,8 +32,9 @@ UNIT_SUFFIXES = (
     ('_ms', 'ms'), ('_s', 's'), ('_m', 'm'), ('_n', 'N'))
 
 
-def param(default, lo=None, hi=None, choices=None, length=None, items=None, doc=None,
-          unit=None):
+def param(default: Any, lo: float | None = None, hi: float | None = None,
+          choices: list[Any] | tuple[Any, ...] | None = None, length: int | None = None,
+          items: type | None = None, doc: str | None = None, unit: str | None = None) -> Any:
     """A config field with its allowed range [lo, hi], choices, fixed list length, or the
     config dataclass (or, for a list that may be empty, the scalar type: float, int, str)
     ``items`` that every element of a list field must be; ``doc`` says
@@ -38,12 +47,12 @@ def param(default, lo=None, hi=None, choices=None, length=None, items=None, doc=
     return dataclasses.field(default=default, metadata=meta)
 
 
-def nested(cls):
+def nested(cls: type) -> Any:
     """A config field holding a nested config dataclass with its defaults."""
     return dataclasses.field(default_factory=cls)
 
 
-def _check_scalar(name, value, default, meta):
+def _check_scalar(name: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
     if isinstance(default, bool):
         if not isinstance(value, bool):
             raise ConfigError(f"parameter '{name}' = {value!r} must be true or false")
@@ -74,7 +83,7 @@ def _check_scalar(name, value, default, meta):
     return value
 
 
-def check_field(name, value, default, meta):
+def check_field(name: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
     """``value`` checked against a field's ``default`` (its type) and metadata."""
     if isinstance(default, list):
         if not isinstance(value, (list, tuple)):
@@ -84,7 +93,7 @@ def check_field(name, value, default, meta):
             raise ConfigError(
                 f"parameter '{name}' = {list(value)!r} must have {length} elements")
         items = meta.get('items')
-        if items is not None and dataclasses.is_dataclass(items):
+        if isinstance(items, type) and dataclasses.is_dataclass(items):
             return [v if isinstance(v, items) else
                     from_dict(items, v, f'{name}[{i}].') for i, v in enumerate(value)]
         item_default = default[0] if default else (items() if items else 0.0)
@@ -92,7 +101,7 @@ def check_field(name, value, default, meta):
     return _check_scalar(name, value, default, meta)
 
 
-def from_dict(cls, data, prefix=''):
+def from_dict(cls: type[ConfigT], data: Mapping[str, Any] | None, prefix: str = '') -> ConfigT:
     """Build and validate config ``cls`` from nested dicts and/or dotted keys."""
     data = _unflatten(data or {})
     if not isinstance(data, dict):
@@ -105,7 +114,7 @@ def from_dict(cls, data, prefix=''):
     for f in dataclasses.fields(cls):
         name = prefix + f.name
         default = _default_of(f)
-        if dataclasses.is_dataclass(default):
+        if _is_config(default):
             kwargs[f.name] = from_dict(type(default), data.get(f.name, {}), name + '.')
         elif f.name in data:
             kwargs[f.name] = check_field(name, data[f.name], default, f.metadata)
@@ -114,7 +123,7 @@ def from_dict(cls, data, prefix=''):
     return cls(**kwargs)
 
 
-def unit_of(name, meta):
+def unit_of(name: str, meta: Mapping[str, Any]) -> str:
     """The unit of field ``name``: ``param(unit=...)``, else its suffix's, else ''."""
     if meta.get('unit') is not None:
         return meta['unit']
@@ -122,7 +131,7 @@ def unit_of(name, meta):
     return next((unit for suffix, unit in UNIT_SUFFIXES if leaf.endswith(suffix)), '')
 
 
-def description(name, meta):
+def description(name: str, meta: Mapping[str, Any]) -> str:
     """One line for a parameter's ROS descriptor: its doc, then range and unit or choices."""
     parts = [meta['doc']] if meta.get('doc') else []
     unit = unit_of(name, meta)
@@ -139,37 +148,38 @@ def description(name, meta):
     return '; '.join(parts)
 
 
-def fields_flat(cls, prefix=''):
+def fields_flat(cls: 'type[DataclassInstance]', prefix: str = ''
+                ) -> dict[str, tuple[Any, dict[str, Any]]]:
     """Dotted-name -> (default, metadata) of every leaf field of config ``cls``."""
     out = {}
     for f in dataclasses.fields(cls):
         default = _default_of(f)
-        if dataclasses.is_dataclass(default):
+        if _is_config(default):
             out.update(fields_flat(type(default), prefix + f.name + '.'))
         else:
             out[prefix + f.name] = (default, dict(f.metadata))
     return out
 
 
-def to_flat(cfg, prefix=''):
+def to_flat(cfg: 'DataclassInstance', prefix: str = '') -> dict[str, Any]:
     """Dotted-name -> value dict of a config (the ROS parameter view)."""
     out = {}
     for f in dataclasses.fields(cfg):
         value = getattr(cfg, f.name)
-        if dataclasses.is_dataclass(value):
+        if _is_config(value):
             out.update(to_flat(value, prefix + f.name + '.'))
         else:
             out[prefix + f.name] = value
     return out
 
 
-def check_value(cls, name, value):
+def check_value(cls: 'type[DataclassInstance]', name: str, value: Any) -> Any:
     """``value`` checked as field ``name`` (dotted) of config ``cls``; ConfigError if bad."""
     default, meta = fields_flat(cls)[name]
     return check_field(name, value, default, meta)
 
 
-def replace_flat(cfg, values):
+def replace_flat(cfg: Any, values: Mapping[str, Any]) -> None:
     """Set dotted-name fields of ``cfg`` in place to already checked ``values``."""
     for name, value in values.items():
         *path, leaf = name.split('.')
@@ -179,7 +189,8 @@ def replace_flat(cfg, values):
         setattr(target, leaf, value)
 
 
-def load_yaml(cls, path, parameter='file'):
+def load_yaml(cls: type[ConfigT], path: str | os.PathLike[str],
+              parameter: str = 'file') -> ConfigT:
     """Load and validate config ``cls`` from a plain YAML file; a file that cannot be read
     or parsed is one ConfigError line naming ``parameter``."""
     try:
@@ -191,16 +202,21 @@ def load_yaml(cls, path, parameter='file'):
     return from_dict(cls, data or {})
 
 
-def _default_of(f):
+def _is_config(value: Any) -> 'TypeGuard[DataclassInstance]':
+    """A config dataclass instance (a nested group), not a dataclass type."""
+    return dataclasses.is_dataclass(value) and not isinstance(value, type)
+
+
+def _default_of(f: dataclasses.Field[Any]) -> Any:
     if f.default is not dataclasses.MISSING:
         return f.default
-    return f.default_factory()
+    return cast(Callable[[], Any], f.default_factory)()
 
 
-def _unflatten(data):
+def _unflatten(data: Any) -> Any:
     if not isinstance(data, dict):
         return data
-    out = {}
+    out: dict[str, Any] = {}
     for key, value in data.items():
         head, _, rest = str(key).partition('.')
         if rest:

@@ -4,8 +4,13 @@ Body frame ``base_link`` is FLU. The article's frame P has x_P right, y_P forwar
 so a vector converts as v_FLU = (v_P.y, -v_P.x, v_P.z).
 """
 import math
+from typing import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+# a short vector or quaternion as callers pass it: a numpy array, a tuple or a list
+Vector = Sequence[float] | NDArray[np.float64]
 
 # Spin sign s_i of each rotor: reaction torque s_i * k * F_i about its own thrust axis.
 SPIN = np.array([1.0, -1.0, 1.0, -1.0])
@@ -13,7 +18,7 @@ SPIN = np.array([1.0, -1.0, 1.0, -1.0])
 ARM_OF_ROTOR = np.array([0, 1, 1, 0])
 
 
-def rotor_positions_flu(l1_m, l2_m):
+def rotor_positions_flu(l1_m: float, l2_m: float) -> NDArray[np.float64]:
     """Rotor hub positions (4x3, FLU) for half rotor spacing l1 and half arm spacing l2."""
     return np.array([
         [l2_m, l1_m, 0.0],
@@ -23,13 +28,14 @@ def rotor_positions_flu(l1_m, l2_m):
     ])
 
 
-def thrust_axes_flu(alpha_rad, beta_rad):
+def thrust_axes_flu(alpha_rad: float, beta_rad: float) -> NDArray[np.float64]:
     """Unit thrust direction (4x3, FLU) of each rotor; arms tilt about +y_FLU."""
     tilt = np.array([alpha_rad, beta_rad])[ARM_OF_ROTOR]
     return np.column_stack([np.sin(tilt), np.zeros(4), np.cos(tilt)])
 
 
-def rotor_wrench_matrix(alpha_rad, beta_rad, l1_m, l2_m, k_m):
+def rotor_wrench_matrix(alpha_rad: float, beta_rad: float, l1_m: float, l2_m: float,
+                        k_m: float) -> NDArray[np.float64]:
     """6x4 matrix A, [force; torque] (FLU, about the rotor centroid) = A @ thrusts_n.
 
     Column i is the unit-thrust wrench of rotor i from first principles:
@@ -40,21 +46,24 @@ def rotor_wrench_matrix(alpha_rad, beta_rad, l1_m, l2_m, k_m):
     return np.vstack([axes.T, torques.T])
 
 
-def rotor_wrench_flu(thrusts_n, alpha_rad, beta_rad, l1_m, l2_m, k_m):
+def rotor_wrench_flu(thrusts_n: ArrayLike, alpha_rad: float, beta_rad: float, l1_m: float,
+                     l2_m: float, k_m: float
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Total rotor force and torque about the rotor centroid in FLU: (force_n, torque_nm)."""
     wrench = rotor_wrench_matrix(alpha_rad, beta_rad, l1_m, l2_m, k_m) @ np.asarray(
         thrusts_n, dtype=float)
     return wrench[:3], wrench[3:]
 
 
-def _cross_rows(a, b):
+def _cross_rows(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Row-wise cross product of two (n, 3) arrays (np.cross is slow on the physics path)."""
     return np.column_stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
                             a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
                             a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]])
 
 
-def article_wrench_p(thrusts_n, alpha_rad, beta_rad, l1_m, l2_m, k_m):
+def article_wrench_p(thrusts_n: ArrayLike, alpha_rad: float, beta_rad: float, l1_m: float,
+                     l2_m: float, k_m: float) -> NDArray[np.float64]:
     """The article's eq. (1)-(2) in frame P: returns (F_y, F_z, tau_x, tau_y, tau_z)."""
     f1, f2, f3, f4 = np.asarray(thrusts_n, dtype=float).tolist()
     sa, ca = math.sin(alpha_rad), math.cos(alpha_rad)
@@ -68,19 +77,19 @@ def article_wrench_p(thrusts_n, alpha_rad, beta_rad, l1_m, l2_m, k_m):
     ])
 
 
-def p_to_flu(v_p):
+def p_to_flu(v_p: ArrayLike) -> NDArray[np.float64]:
     """Convert a vector (or torque) from the article's frame P to FLU."""
     v = np.asarray(v_p, dtype=float)
     return np.array([v[1], -v[0], v[2]])
 
 
-def flu_to_p(v_flu):
+def flu_to_p(v_flu: ArrayLike) -> NDArray[np.float64]:
     """Convert a vector (or torque) from FLU to the article's frame P."""
     v = np.asarray(v_flu, dtype=float)
     return np.array([-v[1], v[0], v[2]])
 
 
-def quat_to_matrix(q):
+def quat_to_matrix(q: NDArray[np.float64] | Sequence[float]) -> NDArray[np.float64]:
     """Rotation matrix of a unit quaternion (x, y, z, w); cheaper than scipy per call."""
     # plain floats: arithmetic on numpy scalars costs several times more
     x, y, z, w = q.tolist() if isinstance(q, np.ndarray) else q
@@ -96,14 +105,14 @@ def quat_to_matrix(q):
 # scipy's Rotation to rounding.
 
 
-def cross3(a, b):
+def cross3(a: Vector, b: Vector) -> NDArray[np.float64]:
     """Cross product of two 3-vectors (np.cross costs ~20 us per call)."""
     a0, a1, a2 = a
     b0, b1, b2 = b
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
-def matrix_to_quat(R):
+def matrix_to_quat(R: ArrayLike) -> NDArray[np.float64]:
     """Unit quaternion of a rotation matrix, as scipy's ``Rotation.from_matrix.as_quat``."""
     (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = np.asarray(R, dtype=float).tolist()
     trace = m00 + m11 + m22
@@ -121,7 +130,7 @@ def matrix_to_quat(R):
     return np.array(q) / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
 
 
-def quat_multiply(p, q):
+def quat_multiply(p: Vector, q: Vector) -> NDArray[np.float64]:
     """Hamilton product p * q: the rotation q followed by p (scipy's ``Rotation * ``)."""
     px, py, pz, pw = p
     qx, qy, qz, qw = q
@@ -131,7 +140,7 @@ def quat_multiply(p, q):
                      pw * qw - px * qx - py * qy - pz * qz])
 
 
-def quat_to_rotvec(q):
+def quat_to_rotvec(q: Vector) -> NDArray[np.float64]:
     """Rotation vector (angle in [0, pi]) of a unit quaternion, as scipy's ``as_rotvec``."""
     x, y, z, w = (float(c) for c in q)
     if w < 0.0 or (w == 0.0 and (x < 0.0 or (x == 0.0 and (y < 0.0 or (y == 0.0 and z < 0.0))))):
@@ -146,7 +155,7 @@ def quat_to_rotvec(q):
     return np.array([scale * x, scale * y, scale * z])
 
 
-def rotvec_to_quat(v):
+def rotvec_to_quat(v: Vector) -> NDArray[np.float64]:
     """Unit quaternion of a rotation vector, as scipy's ``from_rotvec.as_quat``."""
     x, y, z = (float(c) for c in v)
     angle = math.sqrt(x * x + y * y + z * z)
@@ -159,14 +168,15 @@ def rotvec_to_quat(v):
     return np.array([scale * x, scale * y, scale * z, math.cos(angle / 2.0)])
 
 
-def quat_slerp(q0, q1, u):
+def quat_slerp(q0: Vector, q1: Vector, u: float) -> NDArray[np.float64]:
     """Unit quaternion a fraction ``u`` of the way from q0 to q1 along the shortest arc."""
     x, y, z, w = q0
     relative = quat_multiply((-x, -y, -z, w), q1)
     return quat_multiply(q0, rotvec_to_quat(u * quat_to_rotvec(relative)))
 
 
-def euler_zyx_to_matrix(yaw_rad, pitch_rad, roll_rad):
+def euler_zyx_to_matrix(yaw_rad: float, pitch_rad: float, roll_rad: float
+                        ) -> NDArray[np.float64]:
     """R = Rz(yaw) Ry(pitch) Rx(roll), scipy's intrinsic 'ZYX' Euler angles."""
     cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
     cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
@@ -178,7 +188,7 @@ def euler_zyx_to_matrix(yaw_rad, pitch_rad, roll_rad):
     ])
 
 
-def matrix_to_euler_zyx(R):
+def matrix_to_euler_zyx(R: ArrayLike) -> tuple[float, float, float]:
     """(yaw, pitch, roll) of R = Rz(yaw) Ry(pitch) Rx(roll); away from pitch = +-pi/2 these
     are scipy's ``as_euler('ZYX')``, at it roll is 0 as in scipy."""
     (m00, _, _), (m10, m11, m12), (m20, m21, m22) = np.asarray(R, dtype=float).tolist()
@@ -189,7 +199,7 @@ def matrix_to_euler_zyx(R):
     return math.atan2(m10, m00), pitch, math.atan2(m21, m22)
 
 
-def wall_rotation(yaw_deg, inclination_deg):
+def wall_rotation(yaw_deg: float, inclination_deg: float) -> NDArray[np.float64]:
     """R_map_wall of a wall (DESIGN section 5) faced along heading ``yaw`` (from the vehicle
     to the wall) with its top leaning away by ``inclination``: columns x_W right as seen
     from in front, y_W up the wall, z_W the outward surface normal."""
@@ -200,7 +210,8 @@ def wall_rotation(yaw_deg, inclination_deg):
     return np.column_stack([cross3(up, normal), up, normal])
 
 
-def wall_point(position_m, yaw_deg, inclination_deg, u_m, v_m):
+def wall_point(position_m: Vector, yaw_deg: float,
+               inclination_deg: float, u_m: float, v_m: float) -> NDArray[np.float64]:
     """Map point at (u right, v up) on the surface of a wall whose ground line passes
     through ``position_m`` (x, y): the scenario's and the plan's wall coordinates."""
     R = wall_rotation(yaw_deg, inclination_deg)

@@ -14,7 +14,7 @@ PARENT_ENV = 'UAV_TILT_PARENT_PID'
 PR_SET_PDEATHSIG = 1
 
 
-def die_with_parent():
+def die_with_parent() -> bool:
     """Arm the parent-death signal when ``UAV_TILT_PARENT_PID`` is set; returns whether it
     was armed. Exits at once when that parent is already gone. The variable is removed, so
     that what this process starts does not take this process's parent for its own."""

@@ -14,14 +14,14 @@ PACKAGE = 'uav_tilt'
 _HERE = pathlib.Path(__file__).resolve().parent
 
 
-def source_root():
+def source_root() -> pathlib.Path | None:
     """The source checkout this module runs from, or None when it runs installed."""
     root = _HERE.parent
     return root if (root / 'package.xml').is_file() and (root / 'setup.py').is_file() \
         else None
 
 
-def share_dir():
+def share_dir() -> pathlib.Path:
     """The folder holding config/ and models/: the source checkout, else share/uav_tilt
     from the ament index, else share/uav_tilt of the prefix this module is installed in."""
     root = source_root()
@@ -40,20 +40,20 @@ def share_dir():
     return _HERE.parents[3] / 'share' / PACKAGE
 
 
-def candidates(path):
+def candidates(path: str | os.PathLike[str]) -> list[pathlib.Path]:
     """Where ``path`` may be: itself when absolute, else in the working directory, then in
     :func:`share_dir`."""
     path = pathlib.Path(os.path.expanduser(str(path)))
     return [path] if path.is_absolute() else [pathlib.Path.cwd() / path, share_dir() / path]
 
 
-def locate(path):
+def locate(path: str | os.PathLike[str]) -> pathlib.Path:
     """The first of :func:`candidates` that is a file, else the last one (which is missing)."""
     found = candidates(path)
     return next((c for c in found if c.is_file()), found[-1])
 
 
-def resolve(path, parameter):
+def resolve(path: str | os.PathLike[str], parameter: str) -> pathlib.Path:
     """The file ``path`` (the value of parameter ``parameter``); ConfigError, one line,
     when none of :func:`candidates` is a file."""
     found = candidates(path)
@@ -64,6 +64,6 @@ def resolve(path, parameter):
     raise ConfigError(f"parameter '{parameter}' = {str(path)!r}: no such file ({looked})")
 
 
-def default_path(relative):
+def default_path(relative: str | os.PathLike[str]) -> pathlib.Path:
     """A file the package ships, e.g. ``models/detector_int8.onnx`` (may not exist)."""
     return share_dir() / relative

@@ -3,24 +3,28 @@ import array
 import math
 import signal
 import sys
+from typing import Any, Callable, Iterable, Mapping
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
     SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from uav_tilt_common import parent_watch
-from uav_tilt_common.config import ConfigError, check_field, check_value, description, \
-    fields_flat, from_dict, replace_flat
+from uav_tilt_common.config import ConfigError, ConfigT, check_field, check_value, \
+    description, fields_flat, from_dict, replace_flat
 
 INT64 = (-2**63, 2**63 - 1)
-_ARRAY_TYPES = {float: Parameter.Type.DOUBLE_ARRAY, int: Parameter.Type.INTEGER_ARRAY,
-                str: Parameter.Type.STRING_ARRAY}
+_ARRAY_TYPES: dict[type | None, Parameter.Type] = {
+    float: Parameter.Type.DOUBLE_ARRAY, int: Parameter.Type.INTEGER_ARRAY,
+    str: Parameter.Type.STRING_ARRAY}
 
 
-def declare_config(node, cls, dynamic=(), on_change=None):
+def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
+                   on_change: Callable[[dict[str, Any]], None] | None = None) -> ConfigT:
     """Declare every field of config ``cls`` as a parameter with a descriptor (description,
     unit, range, choices) and return the validated config.
 
@@ -31,7 +35,7 @@ def declare_config(node, cls, dynamic=(), on_change=None):
     parameter, its value and what is allowed (a wrong type included).
     """
     fields = fields_flat(cls)
-    values = {}
+    values: dict[str, Any] = {}
     for name, (default, meta) in fields.items():
         declared = default
         if isinstance(default, list) and not default:
@@ -52,7 +56,8 @@ def declare_config(node, cls, dynamic=(), on_change=None):
     return cfg
 
 
-def parameter_descriptor(name, default, meta, read_only=True):
+def parameter_descriptor(name: str, default: Any, meta: Mapping[str, Any],
+                         read_only: bool = True) -> ParameterDescriptor:
     """The ParameterDescriptor of config field ``name`` (``ros2 param describe``)."""
     descriptor = ParameterDescriptor(name=name, description=description(name, meta),
                                      read_only=read_only)
@@ -124,7 +129,8 @@ def _plain(value):
     return list(value) if isinstance(value, (array.array, tuple)) else value
 
 
-def run_node(node_factory, args=None, spin=None):
+def run_node(node_factory: Callable[[], Node], args: list[str] | None = None,
+             spin: Callable[[Node], None] | None = None) -> int:
     """Create the node, serve it with ``spin(node)`` (default ``rclpy.spin``, see
     :mod:`uav_tilt_common.ros_spin`) and shut down cleanly (the ros2/demos pattern).
 
@@ -158,7 +164,7 @@ def run_node(node_factory, args=None, spin=None):
     return code
 
 
-def note_sigint():
+def note_sigint() -> list[int]:
     """A list that gets the signal number when SIGINT arrives; the Python handler before
     still runs. Call before rclpy.init, whose signal handler then chains to this one."""
     seen, previous = [], signal.getsignal(signal.SIGINT)

@@ -1,5 +1,8 @@
 """QoS profiles of DESIGN section 3."""
+from typing import Any, Callable
+
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 # Control path (imu, odom, ee_wrench, actuators/*): reliable, depth 10.
@@ -22,7 +25,7 @@ CLOCK = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                    history=HistoryPolicy.KEEP_LAST)
 
 
-def quiet_publisher(node, msg_type, topic, qos):
+def quiet_publisher(node: Node, msg_type: type, topic: str, qos: QoSProfile) -> Any:
     """A publisher without QoS-event handlers: each handler is one more waitable that the
     executor re-checks on every wake-up, which costs the 300 Hz loop dearly in Python."""
     return node.create_publisher(
@@ -30,7 +33,8 @@ def quiet_publisher(node, msg_type, topic, qos):
         event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
 
-def quiet_subscription(node, msg_type, topic, callback, qos, raw=False):
+def quiet_subscription(node: Node, msg_type: type, topic: str, callback: Callable[[Any], None],
+                       qos: QoSProfile, raw: bool = False) -> Any:
     """A subscription without QoS-event handlers (see :func:`quiet_publisher`); ``raw``:
     the callback gets the serialized message (bytes)."""
     return node.create_subscription(

@@ -7,11 +7,16 @@ controller): SingleThreadedExecutor 1450-1620 / 1380-1840 us, a hand-held rcl wa
 loop 1100-1170 / 1010-1110 us, EventsExecutor 910-1040 / 800-910 us; real-time factor
 1.1-1.4, 0.7-1.5 and 1.6-1.8.
 """
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
 # How long a wait may block: the latency of noticing that the context was shut down.
 WAIT_S = 0.1
 
 
-def spin_events(node):
+def spin_events(node: 'Node') -> None:
     """Serve ``node`` with rclpy's EventsExecutor until its context shuts down.
 
     In rclpy 7.1 ``EventsExecutor.spin()`` busy-waits (a core at 100% with nothing to do)

@@ -2,6 +2,7 @@
 import dataclasses
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 
 @dataclasses.dataclass
@@ -23,12 +24,12 @@ class ActuatorCommand:
     alpha_rad: float = 0.0                 # tilt_front
     beta_rad: float = 0.0                  # tilt_rear
 
-    def as_array(self):
+    def as_array(self) -> NDArray[np.float64]:
         """Six values in ACTUATOR_NAMES order."""
         return np.concatenate([self.thrusts_n, [self.alpha_rad, self.beta_rad]])
 
     @classmethod
-    def from_array(cls, values):
+    def from_array(cls, values: ArrayLike) -> 'ActuatorCommand':
         """Inverse of :meth:`as_array`."""
         values = np.asarray(values, dtype=float)
         return cls(values[:4].copy(), float(values[4]), float(values[5]))

@@ -7,8 +7,10 @@
   so that a plan's or a hint's target can be picked among look-alikes.
 """
 import dataclasses
+from typing import Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 # The inspection objects a scenario places and the detector is trained on (class index =
 # position here); points of interest are defined for bolt plates.
@@ -22,14 +24,14 @@ CANDIDATE_FIELDS = ('x', 'y', 'z', 'nx', 'ny', 'nz', 'cxx', 'cxy', 'cxz', 'cyy',
 _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
-def no_target_covariance():
+def no_target_covariance() -> NDArray[np.float64]:
     """The 36-element covariance of a "no target" target/pose."""
     cov = np.zeros(36)
     cov[0] = NO_TARGET_COV0
     return cov
 
 
-def is_no_target(covariance):
+def is_no_target(covariance: ArrayLike) -> bool:
     """True for the covariance of a "no target" target/pose."""
     cov = np.asarray(covariance, dtype=float).ravel()
     return bool(cov.size) and cov[0] == NO_TARGET_COV0
@@ -46,14 +48,14 @@ class TargetCandidate:
     class_id: int = 0
 
 
-def candidates_to_array(candidates):
+def candidates_to_array(candidates: Iterable[TargetCandidate]) -> NDArray[np.float32]:
     """(N, len(CANDIDATE_FIELDS)) float32 rows of ``candidates``."""
     rows = [np.concatenate([c.p_cam, c.n_cam, [c.cov_cam[i, j] for i, j in _UPPER],
                             [c.score, c.class_id]]) for c in candidates]
     return np.asarray(rows, dtype=np.float32).reshape(-1, len(CANDIDATE_FIELDS))
 
 
-def candidates_from_array(rows):
+def candidates_from_array(rows: ArrayLike) -> list[TargetCandidate]:
     """The candidates of :func:`candidates_to_array` rows; ValueError on a non-finite one."""
     out = []
     for row in np.asarray(rows, dtype=float).reshape(-1, len(CANDIDATE_FIELDS)):

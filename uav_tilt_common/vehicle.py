@@ -26,7 +26,7 @@ class VehicleParams:
     camera_pitch_rad: float = param(0.0, lo=-0.8, hi=0.8)  # positive looks down
 
     @property
-    def hover_thrust_n(self):
+    def hover_thrust_n(self) -> float:
         """Per-rotor thrust that holds the vehicle at zero tilt."""
         return self.mass_kg * GRAVITY / 4.0
 

@@ -2,17 +2,19 @@
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 
 class RotorBank:
     """Four rotors: thrust follows the command with time constant tau, bounded to [0, F_max]."""
 
-    def __init__(self, tau_s, f_max_n, dt_s, initial_n=0.0):
+    def __init__(self, tau_s: float, f_max_n: float, dt_s: float,
+                 initial_n: float = 0.0) -> None:
         self.f_max_n = f_max_n
         self._gain = 1.0 if tau_s <= 0.0 else 1.0 - math.exp(-dt_s / tau_s)
         self.thrusts_n = np.full(4, float(initial_n))
 
-    def step(self, command_n):
+    def step(self, command_n: ArrayLike) -> NDArray[np.float64]:
         """Advance one physics step towards ``command_n``; returns the thrusts [N]."""
         # plain floats: called at the physics rate, where numpy's per-call cost dominates
         gain, f_max = self._gain, self.f_max_n
@@ -24,7 +26,8 @@ class RotorBank:
 class Servo:
     """Position servo: first-order response of bandwidth f_bw, rate limit, angle range."""
 
-    def __init__(self, bandwidth_hz, rate_limit_rad_s, limit_rad, dt_s, initial_rad=0.0):
+    def __init__(self, bandwidth_hz: float, rate_limit_rad_s: float, limit_rad: float,
+                 dt_s: float, initial_rad: float = 0.0) -> None:
         self._omega = 2.0 * math.pi * bandwidth_hz
         self.rate_limit = rate_limit_rad_s
         self.limit = limit_rad
@@ -32,7 +35,7 @@ class Servo:
         self.angle_rad = float(initial_rad)
         self.rate_rad_s = 0.0
 
-    def step(self, command_rad):
+    def step(self, command_rad: float) -> tuple[float, float]:
         """Advance one physics step; returns (angle, rate) of the servo's reference motion."""
         target = min(max(command_rad, -self.limit), self.limit)
         rate = self._omega * (target - self.angle_rad)

@@ -7,11 +7,20 @@ Both give the same pinhole projection, depth and shading.
 """
 import dataclasses
 import sys
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 import pybullet as p
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.config import param
+
+if TYPE_CHECKING:
+    from uav_tilt_sim.gl_renderer import GlRenderer
+    from uav_tilt_sim.visuals import Scene
+
+# what a renderer returns: rgb uint8 (H, W, 3), depth float32 (H, W) metres, seg or None
+Frame = tuple[NDArray[np.uint8], NDArray[np.float32], NDArray[np.int64] | None]
 
 
 @dataclasses.dataclass
@@ -29,7 +38,7 @@ class CameraConfig:
     rate_hz: float = param(30.0, lo=1.0, hi=120.0)
     renderer: str = param('gl', choices=('gl', 'tiny'))
 
-    def k_matrix(self):
+    def k_matrix(self) -> NDArray[np.float64]:
         """3x3 intrinsic matrix K."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
@@ -39,7 +48,7 @@ class CameraConfig:
 ROW_OFFSET_PX = 1.0
 
 
-def projection_matrix(cam):
+def projection_matrix(cam: CameraConfig) -> list[float]:
     """OpenGL projection (column-major, 16 floats) reproducing the pinhole model K."""
     w, h, n, f = cam.width, cam.height, cam.near_m, cam.far_m
     cy = cam.cy + ROW_OFFSET_PX
@@ -52,7 +61,7 @@ def projection_matrix(cam):
     return m.T.reshape(-1).tolist()
 
 
-def view_matrix(p_cam_map, R_map_cam):
+def view_matrix(p_cam_map: ArrayLike, R_map_cam: NDArray[np.float64]) -> list[float]:
     """OpenGL view matrix for an optical frame (z forward, x right, y down) in map."""
     eye = np.asarray(p_cam_map, dtype=float)
     forward, down = R_map_cam[:, 2], R_map_cam[:, 1]
@@ -63,14 +72,16 @@ def view_matrix(p_cam_map, R_map_cam):
 class Lighting:
     """TinyRenderer light: direction (map), colour and Phong coefficients."""
 
-    direction: tuple = (1.0, -0.5, 2.0)
-    color: tuple = (1.0, 1.0, 1.0)
+    direction: Sequence[float] = (1.0, -0.5, 2.0)
+    color: Sequence[float] = (1.0, 1.0, 1.0)
     ambient: float = 0.55
     diffuse: float = 0.45
     specular: float = 0.05
 
 
-def render(client, cam, p_cam_map, R_map_cam, lighting=None, segmentation=False):
+def render(client: int, cam: CameraConfig, p_cam_map: ArrayLike,
+           R_map_cam: NDArray[np.float64], lighting: Lighting | None = None,
+           segmentation: bool = False) -> Frame:
     """Render (rgb uint8 HxWx3, depth float32 HxW metres along the optical axis, seg or None).
 
     Depth is the optical-frame z of the surface; pixels that see nothing read ``inf``.
@@ -100,18 +111,20 @@ class TinyRenderer:
 
     name = 'tiny'
 
-    def __init__(self, cam):
+    def __init__(self, cam: CameraConfig) -> None:
         self.cam = cam
 
-    def render(self, scene, p_cam_map, R_map_cam, lighting=None, segmentation=False):
+    def render(self, scene: 'Scene', p_cam_map: ArrayLike, R_map_cam: NDArray[np.float64],
+               lighting: Lighting | None = None, segmentation: bool = False) -> Frame:
         """As :func:`render`, of the scene's physics client."""
         return render(scene.client, self.cam, p_cam_map, R_map_cam, lighting, segmentation)
 
-    def close(self):
+    def close(self) -> None:
         """Nothing to release."""
 
 
-def make_renderer(cam, warn=None):
+def make_renderer(cam: CameraConfig, warn: Callable[[str], object] | None = None
+                  ) -> 'GlRenderer | TinyRenderer':
     """The renderer ``cam.renderer`` asks for; TinyRenderer, with one line to ``warn``
     (default: stderr), when the GL renderer cannot start."""
     if cam.renderer == 'gl':
@@ -127,6 +140,8 @@ def make_renderer(cam, warn=None):
     return TinyRenderer(cam)
 
 
-def render_with(renderer, scene, p_cam_map, R_map_cam, lighting=None, segmentation=False):
+def render_with(renderer: 'GlRenderer | TinyRenderer', scene: 'Scene', p_cam_map: ArrayLike,
+                R_map_cam: NDArray[np.float64], lighting: Lighting | None = None,
+                segmentation: bool = False) -> Frame:
     """``renderer.render`` with the default lighting when none is given."""
     return renderer.render(scene, p_cam_map, R_map_cam, lighting or Lighting(), segmentation)

@@ -1,18 +1,29 @@
 """Validation of actuator commands arriving from outside (DESIGN section 3, actuators/cmd)."""
-import collections
+from typing import Iterable, NamedTuple, Sequence
 
 import numpy as np
 
 from uav_tilt_common.names import ACTUATOR_NAMES
 from uav_tilt_common.state import ActuatorCommand
+from uav_tilt_common.vehicle import VehicleParams
 
-CheckResult = collections.namedtuple('CheckResult', 'command kind detail clamped')
+
+class CheckResult(NamedTuple):
+    """The command (None when rejected), the kind of problem ('' when none), its detail
+    and whether a value was clamped into range."""
+
+    command: ActuatorCommand | None
+    kind: str
+    detail: str
+    clamped: bool
+
 
 # Beyond this multiple of the physical range a value is garbage, not a saturated command.
 REJECT_FACTOR = 1.5
 
 
-def check_command(names, efforts, positions, vehicle):
+def check_command(names: Iterable[str], efforts: Sequence[float], positions: Sequence[float],
+                  vehicle: VehicleParams) -> CheckResult:
     """Map a JointState-like command to an ActuatorCommand.
 
     Returns CheckResult(command or None, kind of problem or '', detail, clamped): rejected

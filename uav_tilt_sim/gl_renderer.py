@@ -8,11 +8,17 @@ same images of the same world: texel colour times (ambient + diffuse (n . l) + s
 lighting is computed per vertex: exact on the flat faces this world is made of.
 """
 import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pybullet as p
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.geometry import quat_to_matrix
+
+if TYPE_CHECKING:
+    from uav_tilt_sim.camera import CameraConfig, Frame, Lighting
+    from uav_tilt_sim.visuals import Scene, Visual
 
 _VERTEX = """
 #version 330
@@ -73,7 +79,7 @@ class GlRenderer:
     Raises RuntimeError (with the reason) when no OpenGL 3.3 context can be made.
     """
 
-    def __init__(self, cam):
+    def __init__(self, cam: 'CameraConfig') -> None:
         # llvmpipe rasterises in the calling thread: on two cores its worker threads only
         # add hand-overs (measured: 2.5 ms a frame with none, 4 ms with its default two)
         os.environ.setdefault('LP_NUM_THREADS', '0')
@@ -93,21 +99,24 @@ class GlRenderer:
         self.fbo = ctx.framebuffer([self._color, self._depth, self._body],
                                    ctx.depth_renderbuffer((w, h)))
         self._projection = _projection(cam)
-        self._meshes = {}       # id(visual) -> (visual, vao, texture or None)
-        self._static = {}       # body -> [(link, pose)] of static bodies
-        self._drawn = None      # (version, client) of the scene the caches are for
+        # id(visual) -> (visual, vao, texture or None)
+        self._meshes: dict[int, tuple[Visual, Any, Any]] = {}
+        # body -> [(link, pose)] of static bodies
+        self._static: dict[int, list[tuple[int, NDArray[np.float64]]]] = {}
+        # (version, client) of the scene the caches are for
+        self._drawn: tuple[int, int] | None = None
         self._uniforms = {name: self.program[name] for name in (
             'light_dir', 'light_color', 'coeffs', 'normal_to_map', 'mvp', 'body_id', 'rgba',
             'textured')}
         self.name = 'gl'
 
-    def close(self):
+    def close(self) -> None:
         """Release the GL context."""
         if self.ctx is not None:
             self.ctx.release()
             self.ctx = None
 
-    def _mesh(self, visual):
+    def _mesh(self, visual: 'Visual') -> tuple['Visual', Any, Any]:
         entry = self._meshes.get(id(visual))
         if entry is not None and entry[0] is visual:
             return entry
@@ -127,7 +136,7 @@ class GlRenderer:
         self._meshes[id(visual)] = entry
         return entry
 
-    def _release_unused(self, scene):
+    def _release_unused(self, scene: 'Scene') -> None:
         alive = {id(v) for body in scene.bodies.values() for vs in body.links.values()
                  for v in vs}
         for key in [k for k in self._meshes if k not in alive]:
@@ -136,9 +145,10 @@ class GlRenderer:
             if texture is not None:
                 texture.release()
 
-    def _poses(self, scene):
+    def _poses(self, scene: 'Scene') -> list[tuple[int, int, NDArray[np.float64]]]:
         """[(body, link, 4x4 pose in map)] of every drawn link; static ones are cached."""
-        client, out = scene.client, []
+        client = scene.client
+        out: list[tuple[int, int, NDArray[np.float64]]] = []
         for body, entry in scene.bodies.items():
             cached = self._static.get(body) if entry.static else None
             if cached is None:
@@ -148,7 +158,8 @@ class GlRenderer:
             out.extend((body, link, pose) for link, pose in cached)
         return out
 
-    def render(self, scene, p_cam_map, R_map_cam, lighting, segmentation=False):
+    def render(self, scene: 'Scene', p_cam_map: ArrayLike, R_map_cam: ArrayLike,
+               lighting: 'Lighting', segmentation: bool = False) -> 'Frame':
         """(rgb uint8 HxWx3, depth float32 HxW [m] along the optical axis, seg or None).
 
         Depth is ``inf`` and seg -1 where nothing is seen.
@@ -184,7 +195,7 @@ class GlRenderer:
                 vao.render()
         return self._read(segmentation)
 
-    def _read(self, segmentation):
+    def _read(self, segmentation: bool) -> 'Frame':
         w, h = self.cam.width, self.cam.height
         # the projection draws row 0 at the top, so the buffers read out in image order
         rgb = np.frombuffer(self.fbo.read(components=3, attachment=0), np.uint8)
@@ -198,7 +209,7 @@ class GlRenderer:
         return rgb.reshape(h, w, 3).copy(), depth, seg
 
 
-def _view_matrix(p_cam_map, R_map_cam):
+def _view_matrix(p_cam_map: ArrayLike, R_map_cam: ArrayLike) -> NDArray[np.float64]:
     """map -> GL eye (x right, y up, z backwards) for an optical frame (x right, y down)."""
     R_eye_map = np.diag([1.0, -1.0, -1.0]) @ np.asarray(R_map_cam).T
     view = np.eye(4)
@@ -207,7 +218,7 @@ def _view_matrix(p_cam_map, R_map_cam):
     return view
 
 
-def _projection(cam):
+def _projection(cam: 'CameraConfig') -> NDArray[np.float64]:
     """GL projection of the pinhole K with pixel centres at integer pixel coordinates."""
     w, h, n, f = cam.width, cam.height, cam.near_m, cam.far_m
     # window x = u + 1/2 for u = fx X/Z + cx, and window y = v + 1/2 for v = fy Y/Z + cy:
@@ -221,7 +232,7 @@ def _projection(cam):
     ])
 
 
-def _link_matrix(client, body, link):
+def _link_matrix(client: int, body: int, link: int) -> NDArray[np.float64]:
     """4x4 pose in map of a body's base frame (link -1) or of one of its link frames."""
     if link < 0:
         pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)

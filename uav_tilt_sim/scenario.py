@@ -1,5 +1,6 @@
 """Scenario files (DESIGN section 5): the world, disturbances, noise, model mismatch, seed."""
 import dataclasses
+import os
 
 from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError, load_yaml, nested, param
@@ -81,7 +82,8 @@ class Scenario:
     texture_seed: int = param(-1, lo=-1, hi=2**31 - 1)  # -1: same as seed
 
 
-def load_scenario(path=None, parameter='scenario_file'):
+def load_scenario(path: str | os.PathLike[str] | None = None,
+                  parameter: str = 'scenario_file') -> Scenario:
     """Load and validate a scenario YAML (empty path: the default scenario); a relative path
     as :func:`resources.resolve` finds it. ConfigError names ``parameter`` when the file is
     missing or unreadable."""
@@ -89,7 +91,7 @@ def load_scenario(path=None, parameter='scenario_file'):
                                                                 parameter), parameter))
 
 
-def check_scenario(scenario):
+def check_scenario(scenario: Scenario) -> Scenario:
     """Checks across fields: at most one target object. Returns the scenario."""
     targets = sum(o.target for o in scenario.objects)
     if targets > 1:

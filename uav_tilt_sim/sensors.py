@@ -5,9 +5,11 @@ one is read (the camera renders or not, ticks re-sent before lockstep sync) neve
 another's noise, nor the wind (stream 0, uav_tilt_sim.plant).
 """
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.state import VehicleState
+from uav_tilt_sim.scenario import NoiseConfig
 
 RNG_STREAMS = {'imu': 1, 'odometry': 2, 'ft': 3, 'depth': 4}
 
@@ -15,34 +17,34 @@ RNG_STREAMS = {'imu': 1, 'odometry': 2, 'ft': 3, 'depth': 4}
 class SensorModel:
     """Adds zero-mean Gaussian noise of the scenario's standard deviations."""
 
-    def __init__(self, noise, seed):
+    def __init__(self, noise: NoiseConfig, seed: int) -> None:
         self.noise = noise
         self.rngs = {name: np.random.default_rng([seed, stream])
                      for name, stream in RNG_STREAMS.items()}
 
-    def _add(self, sensor, value, std):
+    def _add(self, sensor: str, value: ArrayLike, std: float) -> NDArray[np.float64]:
         value = np.asarray(value, dtype=float)
         if std <= 0.0:
             return value.copy()
         return value + std * self.rngs[sensor].standard_normal(value.shape)
 
-    def gyro(self, w_base):
+    def gyro(self, w_base: ArrayLike) -> NDArray[np.float64]:
         """Angular rate in base_link."""
         return self._add('imu', w_base, self.noise.imu_gyro_rad_s)
 
-    def accel(self, specific_force_base):
+    def accel(self, specific_force_base: ArrayLike) -> NDArray[np.float64]:
         """Specific force in base_link."""
         return self._add('imu', specific_force_base, self.noise.imu_accel_m_s2)
 
-    def force(self, force):
+    def force(self, force: ArrayLike) -> NDArray[np.float64]:
         """F/T force."""
         return self._add('ft', force, self.noise.ft_force_n)
 
-    def torque(self, torque):
+    def torque(self, torque: ArrayLike) -> NDArray[np.float64]:
         """F/T torque."""
         return self._add('ft', torque, self.noise.ft_torque_nm)
 
-    def odometry(self, truth):
+    def odometry(self, truth: VehicleState) -> VehicleState:
         """Mocap-like pose and velocity of base_link (its angular rate as noisy as the
         gyro's, from the odometry's own stream)."""
         q = truth.q_map_base
@@ -55,7 +57,7 @@ class SensorModel:
                             self._add('odometry', truth.v_map, self.noise.odom_vel_m_s),
                             self._add('odometry', truth.w_base, self.noise.imu_gyro_rad_s))
 
-    def depth(self, depth_m):
+    def depth(self, depth_m: NDArray[np.float32]) -> NDArray[np.float32]:
         """Metric depth image with noise growing with range squared (stereo-like)."""
         std = self.noise.depth_m
         if std <= 0.0:

@@ -5,6 +5,7 @@ wall), column 0 = left when looking at the wall. Textures are HxWx3 uint8 RGB.
 """
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
 from uav_tilt_common.targets import OBJECT_CLASSES
 
@@ -164,7 +165,8 @@ def _hazard_sign(rng, s):
 _OBJECTS = {'bolt_plate': _bolt_plate, 'gauge': _gauge, 'hazard_sign': _hazard_sign}
 
 
-def object_texture(cls, rng: np.random.Generator, size_px=256):
+def object_texture(cls: str, rng: np.random.Generator, size_px: int = 256
+                   ) -> NDArray[np.uint8]:
     """Randomised texture (size_px x size_px x 3 RGB uint8) of inspection object ``cls``."""
     if cls not in _OBJECTS:
         raise ValueError(f'unknown object class {cls!r}; expected one of {OBJECT_CLASSES}')
@@ -227,7 +229,8 @@ _WALLS = {'concrete': _concrete, 'bricks': _bricks, 'painted_panels': _painted_p
           'stripes': _stripes}
 
 
-def wall_texture(rng: np.random.Generator, size_px=512, family=None):
+def wall_texture(rng: np.random.Generator, size_px: int = 512, family: str | None = None
+                 ) -> NDArray[np.uint8]:
     """Randomised wall texture; ``family`` (one of WALL_FAMILIES) is drawn when None."""
     family = family or WALL_FAMILIES[int(rng.integers(len(WALL_FAMILIES)))]
     return _finish(_WALLS[family](rng, int(size_px)), rng, noise_sigma=3.0)
@@ -262,7 +265,8 @@ GROUND_FAMILIES = ('concrete', 'asphalt', 'gravel', 'grass')
 _GROUNDS = {'concrete': _concrete, 'asphalt': _asphalt, 'gravel': _gravel, 'grass': _grass}
 
 
-def ground_texture(rng: np.random.Generator, size_px=256, family=None):
+def ground_texture(rng: np.random.Generator, size_px: int = 256, family: str | None = None
+                   ) -> NDArray[np.uint8]:
     """Randomised ground texture (one GROUND_FAMILIES member, drawn when None)."""
     family = family or GROUND_FAMILIES[int(rng.integers(len(GROUND_FAMILIES)))]
     return _finish(_GROUNDS[family](rng, int(size_px)), rng, noise_sigma=3.0)

@@ -8,8 +8,11 @@ import dataclasses
 
 import numpy as np
 import pybullet as p
+from numpy.typing import NDArray
 
-from uav_tilt_sim.visuals import BOX, CYLINDER, SPHERE, Visual, pybullet_shape
+from uav_tilt_common.geometry import Vector
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_sim.visuals import BOX, CYLINDER, SPHERE, Scene, Visual, pybullet_shape
 
 ARM_FRONT, ARM_REAR, TOOL = 0, 1, 2     # link indices = joint indices
 TOOL_ROOT_X_M = 0.10                    # where the tool rod leaves the hub
@@ -27,15 +30,16 @@ class BodyIds:
     bottom_z_m: float               # lowest point below base_link origin
 
 
-def _rod_inertia(mass, length, axis):
+def _rod_inertia(mass: float, length: float, axis: int) -> NDArray[np.float64]:
     """Principal inertia (3,) of a thin rod of ``length`` along ``axis`` (0=x, 1=y, 2=z)."""
     inertia = np.full(3, mass * length ** 2 / 12.0)
     inertia[axis] = 1e-6
     return inertia
 
 
-def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia_scale=1.0,
-                   scene=None):
+def create_vehicle(client: int, vehicle: VehicleParams, position_m: Vector, yaw_rad: float,
+                   mass_scale: float = 1.0, inertia_scale: float = 1.0,
+                   scene: Scene | None = None) -> BodyIds:
     """Create the vehicle in ``client`` (its visuals in ``scene`` when given); returns
     :class:`BodyIds`.
 
@@ -114,7 +118,7 @@ def create_vehicle(client, vehicle, position_m, yaw_rad, mass_scale=1.0, inertia
     return BodyIds(body, hub_com, bottom)
 
 
-def _arm_visual(l1_m):
+def _arm_visual(l1_m: float) -> Visual:
     """An arm rod along y. Propellers are not drawn: spinning blades are nearly invisible to
     a camera, and discs passing behind the eye-in-hand camera's near plane are mis-drawn
     by TinyRenderer (no near-plane clipping)."""

@@ -9,14 +9,20 @@ and the data set fill it as they create bodies.
 import dataclasses
 import os
 import tempfile
+from typing import Any, Iterable, Sequence
 
 import cv2
 import numpy as np
 import pybullet as p
 
+from uav_tilt_common.geometry import Vector
+
 QUAD, BOX, CYLINDER, SPHERE = 'quad', 'box', 'cylinder', 'sphere'
 # Tessellation of round shapes for the GL renderer (TinyRenderer tessellates its own).
 ROUND_SEGMENTS = 24
+
+# (vertices, normals, uvs, triangles) of a shape
+Mesh = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 @dataclasses.dataclass(eq=False)
@@ -31,15 +37,15 @@ class Visual:
     """
 
     kind: str
-    size: tuple
-    rgba: tuple = (1.0, 1.0, 1.0, 1.0)
-    texture: np.ndarray = None          # HxWx3 uint8 RGB
-    position: tuple = (0.0, 0.0, 0.0)   # of the shape in the link frame
-    quaternion: tuple = (0.0, 0.0, 0.0, 1.0)
-    tile_m: float = None
-    texture_m: float = None
+    size: Sequence[float]
+    rgba: Sequence[float] = (1.0, 1.0, 1.0, 1.0)
+    texture: np.ndarray | None = None          # HxWx3 uint8 RGB
+    position: Sequence[float] = (0.0, 0.0, 0.0)   # of the shape in the link frame
+    quaternion: Sequence[float] = (0.0, 0.0, 0.0, 1.0)
+    tile_m: float | None = None
+    texture_m: float | None = None
 
-    def mesh(self):
+    def mesh(self) -> Mesh:
         """(vertices, normals, uvs, triangles) in the link frame, float32 / int32 arrays."""
         builder = {QUAD: _quad_mesh, BOX: _box_mesh, CYLINDER: _cylinder_mesh,
                    SPHERE: _sphere_mesh}[self.kind]
@@ -49,7 +55,8 @@ class Visual:
                 (n @ R.T).astype(np.float32), uv.astype(np.float32), tri.astype(np.int32))
 
 
-def _quad_grid(half_w, half_h, tile_m):
+def _quad_grid(half_w: float, half_h: float, tile_m: float | None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     nx = max(1, int(np.ceil(2 * half_w / tile_m))) if tile_m else 1
     ny = max(1, int(np.ceil(2 * half_h / tile_m))) if tile_m else 1
     u, v = np.meshgrid(np.linspace(0.0, 1.0, nx + 1), np.linspace(0.0, 1.0, ny + 1))
@@ -62,15 +69,16 @@ def _quad_grid(half_w, half_h, tile_m):
     return vertices, np.column_stack([u.ravel(), v.ravel()]), triangles
 
 
-def _quad_mesh(visual):
-    vertices, uvs, triangles = _quad_grid(*visual.size, visual.tile_m)
+def _quad_mesh(visual: Visual) -> Mesh:
+    half_w, half_h = visual.size
+    vertices, uvs, triangles = _quad_grid(half_w, half_h, visual.tile_m)
     if visual.texture_m:
         uvs = uvs * 2 * np.asarray(visual.size) / visual.texture_m
     # PyBullet's texture coordinate v runs from texture row 0 at v = 1 (it flips images).
     return vertices, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)), uvs, triangles
 
 
-def _box_mesh(visual):
+def _box_mesh(visual: Visual) -> Mesh:
     half = np.asarray(visual.size, dtype=float)
     parts = []
     for axis in range(3):
@@ -86,7 +94,7 @@ def _box_mesh(visual):
     return _concat(parts)
 
 
-def _cylinder_mesh(visual):
+def _cylinder_mesh(visual: Visual) -> Mesh:
     radius, length = visual.size
     a = 2 * np.pi * np.arange(ROUND_SEGMENTS + 1) / ROUND_SEGMENTS
     ring = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)])
@@ -106,7 +114,7 @@ def _cylinder_mesh(visual):
     return _concat(parts)
 
 
-def _sphere_mesh(visual):
+def _sphere_mesh(visual: Visual) -> Mesh:
     radius = visual.size[0]
     rows, cols = ROUND_SEGMENTS // 2, ROUND_SEGMENTS
     theta = np.linspace(0, np.pi, rows + 1)[:, None]
@@ -119,18 +127,20 @@ def _sphere_mesh(visual):
     return normals * radius, normals, np.zeros((len(normals), 2)), tri
 
 
-def _concat(parts):
-    out, offset = [[], [], [], []], 0
+def _concat(parts: Iterable[Mesh]) -> Mesh:
+    out: list[list[np.ndarray]] = [[], [], [], []]
+    offset = 0
     for v, n, uv, tri in parts:
         for lst, arr in zip(out, (v, n, uv, tri + offset)):
             lst.append(np.asarray(arr, dtype=float))
         offset += len(v)
-    return tuple(np.vstack(lst) for lst in out)
+    vertices, normals, uvs, triangles = (np.vstack(lst) for lst in out)
+    return vertices, normals, uvs, triangles
 
 
-def pybullet_shape(client, visuals):
+def pybullet_shape(client: int, visuals: Sequence[Visual]) -> int:
     """PyBullet visual shape (for TinyRenderer) of one or more visuals of a link."""
-    shapes = []
+    shapes: list[dict[str, Any]] = []
     for v in visuals:
         if v.kind == QUAD:
             vertices, _, uvs, tri = v.mesh()
@@ -160,8 +170,10 @@ def pybullet_shape(client, visuals):
         physicsClientId=client)
 
 
-def apply_texture(client, body, visual, link=-1):
+def apply_texture(client: int, body: int, visual: Visual, link: int = -1) -> None:
     """Give the PyBullet shape of ``body``/``link`` the texture of ``visual``."""
+    if visual.texture is None:
+        raise ValueError('the visual has no texture')
     with tempfile.TemporaryDirectory() as tmpdir:
         path = os.path.join(tmpdir, 'texture.png')
         cv2.imwrite(path, cv2.cvtColor(visual.texture, cv2.COLOR_RGB2BGR))
@@ -173,37 +185,39 @@ def apply_texture(client, body, visual, link=-1):
 class SceneBody:
     """The visuals of one body, by link (-1: the base); ``static`` bodies never move."""
 
-    links: dict
+    links: dict[int, list[Visual]]
     static: bool
 
 
 class Scene:
     """The visuals of the bodies of physics client ``client``, for the GL renderer."""
 
-    def __init__(self, client):
+    def __init__(self, client: int) -> None:
         self.client = client
-        self.bodies = {}
+        self.bodies: dict[int, SceneBody] = {}
         self.version = 0        # changes with every change of the scene
 
-    def add(self, body, link, visuals, static):
+    def add(self, body: int, link: int, visuals: Iterable[Visual], static: bool) -> None:
         """Register the visuals of ``body``'s ``link`` (a list of :class:`Visual`)."""
         entry = self.bodies.setdefault(body, SceneBody({}, static))
         entry.links[link] = list(visuals)
         entry.static = entry.static and static
         self.version += 1
 
-    def remove(self, body):
+    def remove(self, body: int) -> None:
         """Forget a removed body."""
         self.bodies.pop(body, None)
         self.version += 1
 
-    def clear(self):
+    def clear(self) -> None:
         """Forget every body (after ``resetSimulation``)."""
         self.bodies.clear()
         self.version += 1
 
 
-def create_static_body(client, scene, visual, position, quaternion, collision=-1):
+def create_static_body(client: int, scene: Scene | None, visual: Visual,
+                       position: Vector, quaternion: Vector,
+                       collision: int = -1) -> int:
     """A static (mass 0) body drawn as ``visual``; registered in ``scene`` when given."""
     body = p.createMultiBody(0.0, collision, pybullet_shape(client, [visual]), list(position),
                              list(quaternion), physicsClientId=client)

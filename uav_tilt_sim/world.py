@@ -7,7 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_sim import textures
-from uav_tilt_sim.visuals import QUAD, Visual, create_static_body
+from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
+from uav_tilt_sim.visuals import QUAD, Scene, Visual, create_static_body
 
 WALL_THICKNESS_M = 0.2
 PANEL_THICKNESS_M = 0.01
@@ -36,17 +37,18 @@ class WorldInfo:
     wall_origin_map: np.ndarray
     wall_body: int
     ground_body: int
-    objects: list
-    wall_visual: Visual = None                 # the wall's textured face
-    target_poi_map: np.ndarray = None      # point of interest on the target's front face
-    R_map_target: np.ndarray = None        # z = surface normal out of the wall
+    objects: list[ObjectInstance]
+    wall_visual: Visual                           # the wall's textured face
+    target_poi_map: np.ndarray | None = None      # point of interest on the target's face
+    R_map_target: np.ndarray | None = None        # z = surface normal out of the wall
 
-    def body_classes(self):
+    def body_classes(self) -> dict[int, str]:
         """PyBullet body id -> object class (for segmentation labels)."""
         return {o.body: o.cls for o in self.objects}
 
 
-def build_world(client, scenario, texture_rng=None, scene=None):
+def build_world(client: int, scenario: Scenario, texture_rng: np.random.Generator | None = None,
+                scene: Scene | None = None) -> WorldInfo:
     """Create ground, wall and objects of ``scenario`` (their visuals in ``scene`` when
     given); returns :class:`WorldInfo`."""
     rng = texture_rng or np.random.default_rng(
@@ -79,13 +81,13 @@ def build_world(client, scenario, texture_rng=None, scene=None):
     return info
 
 
-def _set_contact(client, body, wall):
+def _set_contact(client: int, body: int, wall: WallConfig) -> None:
     p.changeDynamics(body, -1, contactStiffness=wall.stiffness_n_per_m,
                      contactDamping=wall.damping_n_s_per_m, lateralFriction=wall.friction,
                      physicsClientId=client)
 
 
-def _build_ground(client, scene, rng):
+def _build_ground(client: int, scene: Scene | None, rng: np.random.Generator) -> int:
     # Tiled, for the same TinyRenderer reason as the wall; without a visual of its own the
     # plane would be drawn from its collision shape with PyBullet's checker texture.
     face = Visual(QUAD, (GROUND_HALF_M, GROUND_HALF_M), texture=textures.ground_texture(rng),
@@ -96,7 +98,9 @@ def _build_ground(client, scene, rng):
     return ground
 
 
-def _build_object(client, scene, cfg, origin, R, quat, rng, wall):
+def _build_object(client: int, scene: Scene | None, cfg: ObjectConfig, origin: np.ndarray,
+                  R: np.ndarray, quat: list[float], rng: np.random.Generator,
+                  wall: WallConfig) -> ObjectInstance:
     half = textures.OBJECT_SIZE_M / 2
     front = origin + R[:, 0] * cfg.u_m + R[:, 1] * cfg.v_m + R[:, 2] * PANEL_THICKNESS_M
     col = p.createCollisionShape(

@@ -8,7 +8,9 @@ checkpoint and says so in ``backend`` and ``note``, so a node logs one honest li
 """
 
 import json
+import os
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -17,9 +19,10 @@ from uav_tilt_vision.detector import detections, input_batch, load_model
 BACKENDS = ('torch', 'onnxruntime')
 
 
-def _as_list(images):
-    single = isinstance(images, np.ndarray) and images.ndim == 3
-    return [images] if single else list(images), single
+def _as_list(images: np.ndarray | Sequence[np.ndarray]) -> tuple[list[np.ndarray], bool]:
+    if isinstance(images, np.ndarray) and images.ndim == 3:
+        return [images], True
+    return list(images), False
 
 
 class TorchDetector:
@@ -27,15 +30,16 @@ class TorchDetector:
 
     backend = 'torch'
 
-    def __init__(self, model_path, note=''):
+    def __init__(self, model_path: str | os.PathLike[str], note: str = '') -> None:
         self.model = load_model(model_path)
         self.model_path, self.note = str(model_path), note
         self.num_classes = self.model.num_classes
 
-    def predict(self, images, conf_thres=0.25, iou_thres=0.45):
+    def predict(self, images: np.ndarray | Sequence[np.ndarray], conf_thres: float = 0.25,
+                iou_thres: float = 0.45) -> np.ndarray | list[np.ndarray]:
         """(N, 6) [x1, y1, x2, y2, score, class] in image pixels; a list in -> a list out."""
-        images, single = _as_list(images)
-        out = self.model.predict(images, conf_thres, iou_thres)
+        batch, single = _as_list(images)
+        out = self.model.predict(batch, conf_thres, iou_thres)
         return out[0] if single else out
 
 
@@ -44,7 +48,7 @@ class OnnxDetector:
 
     backend = 'onnxruntime'
 
-    def __init__(self, model_path, threads=0):
+    def __init__(self, model_path: str | os.PathLike[str], threads: int = 0) -> None:
         import onnxruntime as ort
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = threads
@@ -61,23 +65,25 @@ class OnnxDetector:
         self.model_path, self.note = str(model_path), ''
         self.input_name = self.session.get_inputs()[0].name
 
-    def predict(self, images, conf_thres=0.25, iou_thres=0.45):
+    def predict(self, images: np.ndarray | Sequence[np.ndarray], conf_thres: float = 0.25,
+                iou_thres: float = 0.45) -> np.ndarray | list[np.ndarray]:
         """(N, 6) [x1, y1, x2, y2, score, class] in image pixels; a list in -> a list out."""
-        images, single = _as_list(images)
-        x, frames = input_batch(images, self.img_size)
+        batch, single = _as_list(images)
+        x, frames = input_batch(batch, self.img_size)
         heads = self.session.run(None, {self.input_name: x})
-        out = detections(heads, self.anchors, frames, images, conf_thres, iou_thres)
+        out = detections(heads, self.anchors, frames, batch, conf_thres, iou_thres)
         return out[0] if single else out
 
 
-def onnx_source(model_path):
+def onnx_source(model_path: str | os.PathLike[str]) -> Path:
     """The checkpoint an ONNX model was exported from (recorded in its metadata)."""
     import onnx
     props = {p.key: p.value for p in onnx.load(str(model_path)).metadata_props}
     return Path(model_path).parent / json.loads(props['detector'])['source']
 
 
-def load_detector(model_path, backend='auto'):
+def load_detector(model_path: str | os.PathLike[str], backend: str = 'auto'
+                  ) -> 'TorchDetector | OnnxDetector':
     """A detector with ``predict(rgb) -> (N, 6)``, ``backend`` (the one used) and ``note``.
 
     ``backend``: 'torch', 'onnxruntime', or 'auto' (by the file suffix).

@@ -5,14 +5,21 @@ centre y, width, height). Functions accept numpy arrays; ``xywh_to_xyxy``,
 ``xyxy_to_xywh``, ``box_iou`` and ``wh_iou`` also accept torch tensors.
 """
 
+from typing import Sequence, TypeVar
+
 import cv2
 import numpy as np
 import torch
+from numpy.typing import ArrayLike, NDArray
+
+# boxes as numpy arrays or torch tensors; a function returns the kind it was given
+Boxes = TypeVar('Boxes', np.ndarray, torch.Tensor)
 
 PAD_VALUE = 114  # darknet/ultralytics grey: padding stays neutral for the normalised input
 
 
-def letterbox(img, size, pad_value=PAD_VALUE):
+def letterbox(img: np.ndarray, size: Sequence[int], pad_value: int = PAD_VALUE
+              ) -> tuple[np.ndarray, float, tuple[int, int]]:
     """Resize ``img`` (H, W, C) into ``size`` = (width, height) keeping aspect, padding evenly.
 
     Returns ``(out, scale, (pad_x, pad_y))``; a point maps as ``p_out = p * scale + pad``.
@@ -29,7 +36,7 @@ def letterbox(img, size, pad_value=PAD_VALUE):
     return out, scale, (pad_x, pad_y)
 
 
-def scale_boxes(boxes, scale, pad):
+def scale_boxes(boxes: ArrayLike, scale: float, pad: Sequence[float]) -> NDArray[np.float64]:
     """Map xyxy boxes from original image pixels into the letterboxed image."""
     out = np.asarray(boxes, dtype=np.float64).copy()
     out[..., [0, 2]] = out[..., [0, 2]] * scale + pad[0]
@@ -37,7 +44,8 @@ def scale_boxes(boxes, scale, pad):
     return out
 
 
-def unscale_boxes(boxes, scale, pad, orig_shape):
+def unscale_boxes(boxes: ArrayLike, scale: float, pad: Sequence[float],
+                  orig_shape: Sequence[int]) -> NDArray[np.float64]:
     """Map xyxy boxes from the letterboxed image back to the original (H, W), clipped."""
     out = np.asarray(boxes, dtype=np.float64).copy()
     out[..., [0, 2]] = ((out[..., [0, 2]] - pad[0]) / scale).clip(0, orig_shape[1])
@@ -45,26 +53,26 @@ def unscale_boxes(boxes, scale, pad, orig_shape):
     return out
 
 
-def xywh_to_xyxy(b):
+def xywh_to_xyxy(b: Boxes) -> Boxes:
     """(cx, cy, w, h) -> (x1, y1, x2, y2); numpy or torch, any leading shape."""
     cat = torch.stack if isinstance(b, torch.Tensor) else np.stack
     cx, cy, w, h = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     return cat([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], -1)
 
 
-def xyxy_to_xywh(b):
+def xyxy_to_xywh(b: Boxes) -> Boxes:
     """(x1, y1, x2, y2) -> (cx, cy, w, h); numpy or torch, any leading shape."""
     cat = torch.stack if isinstance(b, torch.Tensor) else np.stack
     x1, y1, x2, y2 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     return cat([(x1 + x2) / 2, (y1 + y2) / 2, x2 - x1, y2 - y1], -1)
 
 
-def box_area(b):
+def box_area(b: Boxes) -> Boxes:
     """Areas of (N, 4) xyxy boxes; numpy or torch."""
     return (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
 
 
-def box_iou(a, b, crowd=None):
+def box_iou(a: Boxes, b: Boxes, crowd: Boxes | None = None) -> Boxes:
     """Pairwise IoU of xyxy boxes: (N, 4) x (M, 4) -> (N, M); numpy or torch.
 
     ``crowd``: optional (M,) bool; for those columns the union is a's area alone
@@ -82,14 +90,15 @@ def box_iou(a, b, crowd=None):
     return inter / (union + 1e-12)
 
 
-def wh_iou(a, b):
+def wh_iou(a: Boxes, b: Boxes) -> Boxes:
     """IoU of boxes sharing a centre: (N, 2) x (M, 2) sizes -> (N, M); numpy or torch."""
     lib = torch if isinstance(a, torch.Tensor) else np
     inter = lib.minimum(a[:, None], b[None]).prod(-1)
     return inter / (a.prod(-1)[:, None] + b.prod(-1)[None] - inter)
 
 
-def nms(boxes, scores, iou_thres, classes=None):
+def nms(boxes: ArrayLike, scores: ArrayLike, iou_thres: float,
+        classes: ArrayLike | None = None) -> NDArray[np.intp]:
     """Greedy non-maximum suppression; class-aware when ``classes`` is given.
 
     Returns the kept indices in descending score order. A box is suppressed by a
@@ -112,7 +121,8 @@ def nms(boxes, scores, iou_thres, classes=None):
     return order[~suppressed]
 
 
-def decode(head, anchors, stride, min_obj=0.0):
+def decode(head: np.ndarray, anchors: ArrayLike, stride: float,
+           min_obj: float = 0.0) -> np.ndarray:
     """Decode one image's raw head map into boxes in input pixels (numpy).
 
     ``head``: (A*(5+C), H, W) logits; ``anchors``: (A, 2) anchor sizes in input pixels.
@@ -128,18 +138,19 @@ def decode(head, anchors, stride, min_obj=0.0):
     with np.errstate(divide='ignore'):
         min_logit = np.log(min_obj) - np.log1p(-min_obj)
     a, y, x = np.nonzero(t[:, 4] > min_logit)
-    p = 1.0 / (1.0 + np.exp(-t[a, :, y, x].astype(np.float32)))
+    p: np.ndarray = 1.0 / (1.0 + np.exp(-t[a, :, y, x].astype(np.float32)))
     xy, wh = cell_xywh(p, np.stack([x, y], -1), anchors[a], stride)
     return np.concatenate([xywh_to_xyxy(np.concatenate([xy, wh], -1)), p[:, 4:]], -1)
 
 
-def head_view(head, num_anchors):
+def head_view(head: torch.Tensor, num_anchors: int) -> torch.Tensor:
     """Reshape (B, A*(5+C), H, W) -> (B, A, H, W, 5+C) without copying data when possible."""
     b, ch, h, w = head.shape
     return head.view(b, num_anchors, ch // num_anchors, h, w).permute(0, 1, 3, 4, 2)
 
 
-def cell_xywh(p, cell, anchors, stride):
+def cell_xywh(p: Boxes, cell: Boxes, anchors: Boxes, stride: float
+              ) -> tuple[Boxes, Boxes]:
     """The decode formula: centre and size (input pixels) from sigmoid outputs, cells, anchors
     (numpy or torch)."""
     return (p[..., :2] * 2 - 0.5 + cell) * stride, (p[..., 2:4] * 2) ** 2 * anchors

@@ -19,13 +19,16 @@
 
 import contextlib
 import json
+import os
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any, Callable, Iterator, Sequence
 
+import numpy as np
 import torch
 
-from uav_tilt_vision.detector import input_batch, load_model
+from uav_tilt_vision.detector import Detector, input_batch, load_model
 from uav_tilt_vision.profile import profile_model
 from uav_tilt_vision.train import card_path, evaluate, git_commit, train
 from uav_tilt_vision.yolo_data import YoloDataset
@@ -39,7 +42,7 @@ QUANTIZATION = ('onnxruntime static QDQ, per-channel int8 weights, uint8 activat
                 'stem float')
 
 
-def prune(model, ratio, round_to=8):
+def prune(model: Detector, ratio: float, round_to: int = 8) -> Detector:
     """Remove ``ratio`` of the channels of every conv except the heads, in place."""
     import torch_pruning as tp
     example = torch.zeros(1, 3, model.img_size[1], model.img_size[0])
@@ -50,7 +53,7 @@ def prune(model, ratio, round_to=8):
     return model
 
 
-def export_onnx(model, path, source):
+def export_onnx(model: Detector, path: str | os.PathLike[str], source: str) -> None:
     """Export the raw heads of ``model`` (eval mode, dynamic batch) to ONNX.
 
     ``source``: file name of the checkpoint, recorded (with anchors, input size and class
@@ -66,7 +69,7 @@ def export_onnx(model, path, source):
                         'num_classes': model.num_classes, 'source': source})
 
 
-def set_metadata(path, detector_meta):
+def set_metadata(path: str | os.PathLike[str], detector_meta: dict[str, Any]) -> None:
     """Write the 'detector' JSON metadata entry of an ONNX file."""
     import onnx
     proto = onnx.load(str(path))
@@ -75,24 +78,27 @@ def set_metadata(path, detector_meta):
     onnx.save(proto, str(path))
 
 
-def calibration_images(data_dir, n, img_size):
+def calibration_images(data_dir: str | os.PathLike[str], n: int,
+                       img_size: Sequence[int]) -> Iterator[np.ndarray]:
     """The first ``n`` images of a set (sorted names: deterministic) as detector input."""
     ds = YoloDataset(data_dir, img_size)
     for i in range(min(n, len(ds))):
         yield input_batch([ds.read_rgb(i)], img_size)[0]
 
 
-def quantize_int8(fp32_path, out_path, data_dir, n_calib, img_size):
+def quantize_int8(fp32_path: str | os.PathLike[str], out_path: str | os.PathLike[str],
+                  data_dir: str | os.PathLike[str], n_calib: int,
+                  img_size: Sequence[int]) -> None:
     """Static per-channel QDQ int8 quantization of an ONNX model (metadata kept)."""
     import onnx
     from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod,
                                           QuantFormat, QuantType, quantize_static)
 
     class Reader(CalibrationDataReader):
-        def __init__(self):
+        def __init__(self) -> None:
             self.it = iter(calibration_images(data_dir, n_calib, img_size))
 
-        def get_next(self):
+        def get_next(self) -> dict[str, np.ndarray] | None:
             x = next(self.it, None)
             return None if x is None else {'images': x}
 
@@ -109,7 +115,7 @@ def quantize_int8(fp32_path, out_path, data_dir, n_calib, img_size):
     set_metadata(out_path, json.loads(meta['detector']))
 
 
-def float_stem(proto, pools=FLOAT_STEM_POOLS):
+def float_stem(proto: Any, pools: int = FLOAT_STEM_POOLS) -> list[str]:
     """Names of the conv, activation and pool nodes up to the ``pools``-th maxpool."""
     names = []
     for node in proto.graph.node:   # the exporter writes nodes in execution order
@@ -121,15 +127,18 @@ def float_stem(proto, pools=FLOAT_STEM_POOLS):
     return names
 
 
-def size_stats(model):
+def size_stats(model: Detector) -> dict[str, int]:
     """Parameters and MACs per image at the model's input size."""
     prof = profile_model(model, (1, 3, model.img_size[1], model.img_size[0]))
     return {'params': prof['params'], 'macs': prof['macs']}
 
 
-def compress(model_path, data_dir, out_dir, ratio=0.5, finetune_epochs=4, seed=0,
-             calib_images=128, eval_dir=None, lr=1e-3, crop=None, distill_gain=1.0,
-             log=print):
+def compress(model_path: str | os.PathLike[str], data_dir: str | os.PathLike[str],
+             out_dir: str | os.PathLike[str], ratio: float = 0.5, finetune_epochs: int = 4,
+             seed: int = 0, calib_images: int = 128,
+             eval_dir: str | os.PathLike[str] | None = None, lr: float = 1e-3,
+             crop: Sequence[int] | None = None, distill_gain: float = 1.0,
+             log: Callable[[str], Any] = print) -> dict[str, Any]:
     """fp32 ``.pt`` -> ``detector_pruned.pt`` (+ card) and ``detector_int8.onnx`` (+ card).
 
     Returns a report with params, MACs and (with ``eval_dir``) mAP of every stage.
@@ -157,7 +166,9 @@ def compress(model_path, data_dir, out_dir, ratio=0.5, finetune_epochs=4, seed=0
     return report
 
 
-def quantize(pruned_path, data_dir, calib_images=128, eval_dir=None):
+def quantize(pruned_path: str | os.PathLike[str], data_dir: str | os.PathLike[str],
+             calib_images: int = 128,
+             eval_dir: str | os.PathLike[str] | None = None) -> dict[str, Any]:
     """``detector_pruned.pt`` -> ``detector_int8.onnx`` (+ card) beside it; its report."""
     from uav_tilt_vision.backends import OnnxDetector
     pruned_path = Path(pruned_path)

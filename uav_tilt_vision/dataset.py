@@ -22,7 +22,9 @@ import dataclasses
 import functools
 import json
 import multiprocessing
+import os
 from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
 import cv2
 import numpy as np
@@ -37,7 +39,14 @@ from uav_tilt_sim.plant import camera_rotation_in_base
 from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
 from uav_tilt_sim.vehicle_body import create_vehicle
 from uav_tilt_sim.visuals import BOX, Scene, Visual, apply_texture, create_static_body
-from uav_tilt_sim.world import build_world
+from uav_tilt_sim.world import WorldInfo, build_world
+
+T = TypeVar('T')
+R_ = TypeVar('R_')
+# one world's job for render_world: (out, seed, split, world, image indices, renderer)
+Job = tuple[str, int, str, int, range, str]
+# YOLO rows [class, cx, cy, w, h] (normalised)
+LabelRows = list[list[float]]
 
 CLASSES = textures.OBJECT_CLASSES
 IMAGES_PER_WORLD = 6
@@ -57,11 +66,11 @@ class SplitSpec:
     """What a split may draw: its RNG stream, wall families and lighting ranges."""
 
     stream: int
-    wall_families: tuple
-    ambient: tuple
-    diffuse: tuple
-    light_tint: tuple          # per-channel light colour range
-    light_azimuth_deg: tuple   # |azimuth| of the light about the wall normal
+    wall_families: tuple[str, ...]
+    ambient: tuple[float, float]
+    diffuse: tuple[float, float]
+    light_tint: tuple[float, float]          # per-channel light colour range
+    light_azimuth_deg: tuple[float, float]   # |azimuth| of the light about the wall normal
 
 
 SPLITS = {
@@ -72,12 +81,12 @@ SPLITS = {
 }
 
 
-def random_scenario(rng):
+def random_scenario(rng: np.random.Generator) -> Scenario:
     """A wall with 1-5 non-overlapping inspection objects of random classes."""
     wall = WallConfig(position_m=[3.0, 0.0], yaw_deg=float(rng.uniform(-180, 180)),
                       inclination_deg=float(rng.uniform(-20, 20)),
                       width_m=float(rng.uniform(6, 12)), height_m=float(rng.uniform(4, 6)))
-    objects = []
+    objects: list[ObjectConfig] = []
     for _ in range(int(rng.integers(1, 6))):
         u, v = rng.uniform(*PATCH_UV_M)
         if all(max(abs(u - o.u_m), abs(v - o.v_m)) > 0.3 for o in objects):
@@ -86,14 +95,15 @@ def random_scenario(rng):
     return Scenario(wall=wall, objects=objects)
 
 
-def _box_body(scene, centre, R, half_extents, rng):
+def _box_body(scene: Scene, centre: np.ndarray, R: np.ndarray, half_extents: Sequence[float],
+              rng: np.random.Generator) -> int:
     """A plain-coloured static box oriented by R (map)."""
     box = Visual(BOX, tuple(half_extents), tuple(rng.uniform(0, 1, 3)) + (1.0,))
     return create_static_body(scene.client, scene, box, centre,
                               Rotation.from_matrix(R).as_quat())
 
 
-def build_random_world(scene, rng, spec):
+def build_random_world(scene: Scene, rng: np.random.Generator, spec: SplitSpec) -> WorldInfo:
     """Build a random world whose wall texture is of one of ``spec``'s families."""
     scenario = random_scenario(rng)
     client = scene.client
@@ -112,7 +122,8 @@ def build_random_world(scene, rng, spec):
     return info
 
 
-def camera_pose(rng, info, cam):
+def camera_pose(rng: np.random.Generator, info: WorldInfo, cam: CameraConfig
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Random (eye, R_map_cam) 0.4-4 m from the wall looking at it, up to 45 deg off-normal.
 
     The aim point is offset from an object by up to the half field of view, so objects
@@ -136,7 +147,8 @@ def camera_pose(rng, info, cam):
     return eye, R_cam @ roll
 
 
-def random_lighting(rng, spec, R_map_wall):
+def random_lighting(rng: np.random.Generator, spec: SplitSpec, R_map_wall: np.ndarray
+                    ) -> Lighting:
     """Lighting drawn from the split's ranges; direction about the wall normal."""
     az = np.radians(rng.uniform(*spec.light_azimuth_deg)) * rng.choice([-1, 1])
     el = np.radians(rng.uniform(15, 70))
@@ -147,7 +159,8 @@ def random_lighting(rng, spec, R_map_wall):
                     specular=float(rng.uniform(0.0, 0.2)))
 
 
-def add_occluder(scene, rng, eye, info):
+def add_occluder(scene: Scene, rng: np.random.Generator, eye: np.ndarray,
+                 info: WorldInfo) -> int:
     """A bar (pipe, cable, strut) between the camera and a random object; its body id."""
     obj = info.objects[int(rng.integers(len(info.objects)))]
     t = rng.uniform(0.3, 0.85)
@@ -157,7 +170,8 @@ def add_occluder(scene, rng, eye, info):
                                         rng.uniform(0.005, 0.05)], rng)
 
 
-def add_vehicle(scene, eye, R_map_cam, vehicle=VehicleParams()):
+def add_vehicle(scene: Scene, eye: np.ndarray, R_map_cam: np.ndarray,
+                vehicle: VehicleParams = VehicleParams()) -> int:
     """The vehicle posed so that its eye-in-hand camera is at (eye, R_map_cam); its body id."""
     client = scene.client
     R_map_base = R_map_cam @ camera_rotation_in_base(vehicle.camera_pitch_rad).T
@@ -169,7 +183,7 @@ def add_vehicle(scene, eye, R_map_cam, vehicle=VehicleParams()):
     return body
 
 
-def photometric(rgb, rng):
+def photometric(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Exposure gain and gamma, optional Gaussian or motion blur, sensor noise."""
     img = np.clip(rgb.astype(np.float32) / 255.0 * np.exp(rng.uniform(-0.5, 0.4)), 0, 1)
     img = img ** rng.uniform(0.75, 1.35)
@@ -178,7 +192,7 @@ def photometric(rgb, rng):
         img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.5, 1.5))
     elif r < 0.35:
         n = int(rng.integers(3, 10))
-        kernel = np.zeros((n, n), np.float32)
+        kernel: np.ndarray = np.zeros((n, n), np.float32)
         kernel[n // 2] = 1.0 / n
         rot = cv2.getRotationMatrix2D(((n - 1) / 2, (n - 1) / 2), rng.uniform(0, 180), 1.0)
         kernel = cv2.warpAffine(kernel, rot, (n, n))
@@ -187,7 +201,8 @@ def photometric(rgb, rng):
     return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
-def projected_area(centre_map, R_map_wall, eye, R_map_cam, cam):
+def projected_area(centre_map: np.ndarray, R_map_wall: np.ndarray, eye: np.ndarray,
+                   R_map_cam: np.ndarray, cam: CameraConfig) -> float:
     """Image area (px^2) of an object's whole front face; inf when it reaches behind the eye."""
     half = textures.OBJECT_SIZE_M / 2
     corners = [centre_map + R_map_wall @ [su * half, sv * half, 0.0]
@@ -199,10 +214,13 @@ def projected_area(centre_map, R_map_wall, eye, R_map_cam, cam):
     return abs(cv2.contourArea((uv[:, :2] / uv[:, 2:]).astype(np.float32)))
 
 
-def labels_from_segmentation(seg, info, eye, R_map_cam, cam):
+def labels_from_segmentation(seg: np.ndarray, info: WorldInfo, eye: np.ndarray,
+                             R_map_cam: np.ndarray, cam: CameraConfig
+                             ) -> tuple[LabelRows, LabelRows]:
     """YOLO rows [class, cx, cy, w, h] (normalised) of the objects in view, as two lists:
     the sufficiently visible ones (labels) and the rest (regions evaluation ignores)."""
-    rows, ignore = [], []
+    rows: LabelRows = []
+    ignore: LabelRows = []
     for obj in info.objects:
         ys, xs = np.nonzero(seg == obj.body)
         if len(xs) == 0:
@@ -217,12 +235,12 @@ def labels_from_segmentation(seg, info, eye, R_map_cam, cam):
 
 
 @functools.lru_cache(maxsize=None)
-def _renderer(renderer):
+def _renderer(renderer: str) -> Any:
     """One renderer per process (a GL context is costly to make), reused for every world."""
     return make_renderer(dataclasses.replace(CameraConfig(), renderer=renderer))
 
 
-def render_world(job):
+def render_world(job: Job) -> list[int]:
     """Render and write the images of one world; returns the class ids it labelled."""
     out, seed, split, world, indices, renderer = job
     spec, cam = SPLITS[split], CameraConfig()
@@ -231,7 +249,7 @@ def render_world(job):
     scene = Scene(client)
     try:
         info = build_random_world(scene, rng, spec)
-        classes = []
+        classes: list[int] = []
         for k in indices:
             eye, R_cam = camera_pose(rng, info, cam)
             extra = [add_occluder(scene, rng, eye, info)] \
@@ -254,12 +272,13 @@ def render_world(job):
         p.disconnect(client)
 
 
-def label_text(rows):
+def label_text(rows: Iterable[Sequence[float]]) -> str:
     """YOLO label file text for rows [class, cx, cy, w, h]."""
     return ''.join(f'{int(r[0])} ' + ' '.join(f'{v:.6f}' for v in r[1:]) + '\n' for r in rows)
 
 
-def generate(out, n, seed=0, split='train', jobs=1, show_progress=True, renderer='gl'):
+def generate(out: str | os.PathLike[str], n: int, seed: int = 0, split: str = 'train',
+             jobs: int = 1, show_progress: bool = True, renderer: str = 'gl') -> dict[str, Any]:
     """Write ``n`` labelled images and ``meta.json`` to ``out``; returns the meta dict.
 
     ``renderer``: the camera's renderer (``gl`` or ``tiny``, see ``uav_tilt_sim.camera``);
@@ -298,12 +317,12 @@ def generate(out, n, seed=0, split='train', jobs=1, show_progress=True, renderer
 class _Serial:
     """In-process stand-in for a worker pool (``imap`` and the context manager)."""
 
-    def __enter__(self):
+    def __enter__(self) -> '_Serial':
         return self
 
-    def __exit__(self, *exc):
-        return False
+    def __exit__(self, *exc: object) -> None:
+        """Nothing to release; exceptions propagate."""
 
     @staticmethod
-    def imap(fn, items):
+    def imap(fn: Callable[[T], R_], items: Iterable[T]) -> Iterator[R_]:
         return map(fn, items)

@@ -26,8 +26,12 @@ unscaled. Grids are 10x8 (stride 32), 20x16 (stride 16), 40x32 (stride 8) and 80
 (stride 4).
 """
 
+import os
+from typing import Any, Sequence, cast
+
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 from torch import nn
 
 from uav_tilt_vision.boxes import decode, letterbox, nms, unscale_boxes
@@ -48,12 +52,12 @@ DEFAULT_ANCHORS = {2: (((48, 40), (72, 80), (128, 112)), ((10, 12), (18, 22), (3
 SCALES = tuple(DEFAULT_ANCHORS)
 
 
-def reference_channels(scales=2):
+def reference_channels(scales: int = 2) -> list[int]:
     """The darknet channel list of the ``scales``-head YOLOv3-tiny."""
     return list(REF_CHANNELS) + [c for pair in EXTRA_SCALE_CHANNELS[:scales - 2] for c in pair]
 
 
-def scaled_channels(width_mult, scales=2):
+def scaled_channels(width_mult: float, scales: int = 2) -> list[int]:
     """Reference channel list times ``width_mult``, rounded to multiples of 8 (>= 8)."""
     return [max(8, int(round(c * width_mult / 8)) * 8) for c in reference_channels(scales)]
 
@@ -61,7 +65,7 @@ def scaled_channels(width_mult, scales=2):
 class ConvBNAct(nn.Sequential):
     """Conv (no bias) -> BatchNorm -> LeakyReLU(0.1), 'same' padding."""
 
-    def __init__(self, c_in, c_out, k):
+    def __init__(self, c_in: int, c_out: int, k: int) -> None:
         super().__init__(nn.Conv2d(c_in, c_out, k, 1, k // 2, bias=False),
                          nn.BatchNorm2d(c_out), nn.LeakyReLU(0.1, inplace=True))
 
@@ -70,8 +74,12 @@ class Detector(nn.Module):
     """YOLOv3-tiny family: ``forward`` returns raw heads [(B, A*(5+C), H/32, W/32), (.., /16)]
     and, with ``scales`` 3 and 4, (.., /8) and (.., /4)."""
 
-    def __init__(self, num_classes=80, width_mult=1.0, channels=None, anchors=None,
-                 img_size=IMG_SIZE, scales=2):
+    anchors: torch.Tensor           # (scales, A, 2) anchor sizes in input pixels (a buffer)
+    meta: dict[str, Any]            # what load_model read with the weights
+
+    def __init__(self, num_classes: int = 80, width_mult: float = 1.0,
+                 channels: Sequence[int] | None = None, anchors: ArrayLike | None = None,
+                 img_size: Sequence[int] = IMG_SIZE, scales: int = 2) -> None:
         super().__init__()
         if scales not in SCALES:
             raise ValueError(f'scales must be one of {SCALES}, got {scales}')
@@ -107,33 +115,34 @@ class Detector(nn.Module):
         self._init_head_bias()
 
     @property
-    def heads(self):
+    def heads(self) -> list[nn.Conv2d]:
         """The 1x1 detection convs, coarsest first."""
         return [getattr(self, f'head{k}') for k in range(len(self.strides))]
 
-    def _convs(self):
+    def _convs(self) -> list[ConvBNAct]:
         extra = [getattr(self, f'c{i}') for i in range(11, 2 * len(self.strides) + 7)]
-        return list(self.backbone) + [self.c7, self.c8, self.c9, self.c10] + extra
+        return [cast(ConvBNAct, m) for m in self.backbone] + [self.c7, self.c8, self.c9,
+                                                              self.c10] + extra
 
-    def _init_head_bias(self):
+    def _init_head_bias(self) -> None:
         # Objectness prior ~1e-2 and class prior 1/C (focal-loss paper / YOLOv5) so the
         # first steps are not dominated by the huge number of background cells.
         for head in self.heads:
-            b = head.bias.data.view(self.anchors.shape[1], -1)
+            b = cast(torch.Tensor, head.bias).data.view(self.anchors.shape[1], -1)
             b[:, 4] = float(np.log(0.01 / 0.99))
             b[:, 5:] = float(np.log(0.6 / max(self.num_classes - 0.99, 1.0)))
 
-    def channels(self):
+    def channels(self) -> list[int]:
         """Actual output channels of c0..c10 (read from the modules, so pruning is reflected)."""
-        return [int(m[0].out_channels) for m in self._convs()]
+        return [int(cast(nn.Conv2d, m[0]).out_channels) for m in self._convs()]
 
-    def config(self):
+    def config(self) -> dict[str, Any]:
         """Constructor arguments that rebuild this architecture (JSON-serialisable)."""
         return {'num_classes': self.num_classes, 'width_mult': self.width_mult,
                 'channels': self.channels(), 'anchors': self.anchors.tolist(),
                 'img_size': list(self.img_size), 'scales': len(self.strides)}
 
-    def forward(self, x):
+    def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
         """Raw head logits for a (B, 3, H, W) float input in [0, 1]."""
         routes = []
         for i in range(5):
@@ -153,7 +162,8 @@ class Detector(nn.Module):
         return out
 
     @torch.no_grad()
-    def predict(self, images, conf_thres=0.25, iou_thres=0.45, max_det=100):
+    def predict(self, images: np.ndarray | Sequence[np.ndarray], conf_thres: float = 0.25,
+                iou_thres: float = 0.45, max_det: int = 100) -> list[np.ndarray]:
         """Detect in uint8 RGB images (H, W, 3), a list or one image.
 
         Returns one (N, 6) float array per image: x1, y1, x2, y2 (original image
@@ -171,7 +181,8 @@ class Detector(nn.Module):
                           iou_thres, max_det)
 
 
-def input_batch(images, img_size):
+def input_batch(images: Sequence[np.ndarray] | np.ndarray, img_size: Sequence[int]
+                ) -> tuple[np.ndarray, list[tuple[float, tuple[int, int]]]]:
     """The detector's input for uint8 RGB images: exposure-normalised, letterboxed, float
     NCHW in [0, 1]; plus each image's (scale, pad) for mapping boxes back."""
     boxes = [letterbox(normalize_exposure(img), img_size) for img in images]
@@ -179,7 +190,10 @@ def input_batch(images, img_size):
     return x, [(s, p) for _, s, p in boxes]
 
 
-def detections(heads, anchors, frames, images, conf_thres, iou_thres, max_det=100):
+def detections(heads: Sequence[np.ndarray], anchors: np.ndarray,
+               frames: Sequence[tuple[float, tuple[int, int]]],
+               images: Sequence[np.ndarray] | np.ndarray,
+               conf_thres: float, iou_thres: float, max_det: int = 100) -> list[np.ndarray]:
     """One (N, 6) detection array per image from the raw heads (numpy, coarsest first).
 
     ``anchors``: (scales, A, 2); ``frames``: each image's (scale, pad) from ``input_batch``.
@@ -192,7 +206,8 @@ def detections(heads, anchors, frames, images, conf_thres, iou_thres, max_det=10
     return out
 
 
-def postprocess(det, conf_thres, iou_thres, max_det, scale, pad, orig_shape):
+def postprocess(det: np.ndarray, conf_thres: float, iou_thres: float, max_det: int,
+                scale: float, pad: Sequence[float], orig_shape: Sequence[int]) -> np.ndarray:
     """Score filter, class-aware NMS and mapping back to the original image for one image."""
     cls = det[:, 5:].argmax(1)
     score = det[:, 4] * det[np.arange(len(det)), 5 + cls]
@@ -203,7 +218,7 @@ def postprocess(det, conf_thres, iou_thres, max_det, scale, pad, orig_shape):
     return np.concatenate([xyxy, score[idx, None], cls[idx, None]], 1).astype(np.float32)
 
 
-def grow_scales(model, scales, extra_anchors):
+def grow_scales(model: Detector, scales: int, extra_anchors: ArrayLike) -> Detector:
     """A ``scales``-head copy of ``model`` that keeps its weights and anchors; the new finer
     heads (anchors ``extra_anchors``, one (A, 2) set per new head) start untrained."""
     have = len(model.strides)
@@ -222,7 +237,8 @@ def grow_scales(model, scales, extra_anchors):
     return grown
 
 
-def save_model(path, model, meta=None):
+def save_model(path: str | os.PathLike[str], model: Detector,
+               meta: dict[str, Any] | None = None) -> None:
     """Save architecture config, weights and a JSON-like ``meta`` dict to ``path``.
 
     Float weights are stored in half precision (half the file; ``load_model`` restores
@@ -233,7 +249,7 @@ def save_model(path, model, meta=None):
     torch.save({'config': model.config(), 'state_dict': state, 'meta': dict(meta or {})}, path)
 
 
-def load_model(path, map_location='cpu'):
+def load_model(path: str | os.PathLike[str], map_location: str = 'cpu') -> Detector:
     """Rebuild a ``Detector`` saved by ``save_model`` (pruned channel counts included).
 
     The saved ``meta`` dict is attached as ``model.meta``; the model is in eval mode.

@@ -7,12 +7,14 @@ amplifies.
 """
 
 import cv2
+import numpy as np
 
 TARGET_MEAN = 100.0   # mean 8-bit level of a well-exposed training image
 MAX_GAIN = 2.0
 
 
-def normalize_exposure(img, target_mean=TARGET_MEAN, max_gain=MAX_GAIN):
+def normalize_exposure(img: np.ndarray, target_mean: float = TARGET_MEAN,
+                       max_gain: float = MAX_GAIN) -> np.ndarray:
     """uint8 image brightened by min(target_mean / mean, max_gain) when darker than target."""
     mean = float(img[::4, ::4].mean())    # a sparse sample estimates the mean well enough
     if mean >= target_mean:

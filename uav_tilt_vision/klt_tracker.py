@@ -1,8 +1,10 @@
 """Box tracking between detections with pyramidal KLT (article sec. 3.2), no rclpy."""
 import dataclasses
+from typing import Any
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.config import param
 
@@ -27,24 +29,24 @@ class KltConfig:
 class KltBoxTracker:
     """Tracks an axis-aligned box with KLT feature points and a similarity transform."""
 
-    def __init__(self, config=None):
+    def __init__(self, config: KltConfig | None = None) -> None:
         self.config = config or KltConfig()
-        self._gray = None
-        self._pts = None
+        self._gray: np.ndarray = np.zeros((0, 0), np.uint8)   # set with the box by init
+        self._pts: np.ndarray = np.zeros((0, 2), np.float32)
         self._n_seeded = 0
-        self.box_xyxy = None
+        self.box_xyxy: NDArray[np.float64] | None = None
 
     @property
-    def lost(self):
+    def lost(self) -> bool:
         """True until init and after an update that lost the target."""
         return self.box_xyxy is None
 
     @property
-    def points(self):
+    def points(self) -> np.ndarray:
         """(N, 2) feature points being tracked; empty when lost."""
         return np.zeros((0, 2), np.float32) if self.lost else self._pts.copy()
 
-    def init(self, gray, box_xyxy):
+    def init(self, gray: np.ndarray, box_xyxy: ArrayLike) -> bool:
         """Start tracking ``box_xyxy`` in ``gray``; returns False when it has too few features."""
         self.box_xyxy = np.asarray(box_xyxy, np.float64).copy()
         self._gray = gray
@@ -54,19 +56,24 @@ class KltBoxTracker:
             self.box_xyxy = None
         return not self.lost
 
-    def update(self, gray):
+    def update(self, gray: np.ndarray) -> tuple[NDArray[np.float64] | None, float]:
         """Track into ``gray``: ``(box_xyxy, quality)``, or ``(None, 0.0)`` when lost.
 
         quality = inliers / points tracked into this frame, in [0, 1].
         """
-        if self.lost:
+        box = self.box_xyxy
+        if box is None:
             return None, 0.0
         cfg = self.config
         prev = self._pts.reshape(-1, 1, 2)
-        lk = dict(winSize=(cfg.win_size_px, cfg.win_size_px), maxLevel=cfg.pyramid_levels,
-                  criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
-        fwd, st_f, _ = cv2.calcOpticalFlowPyrLK(self._gray, gray, prev, None, **lk)
-        back, st_b, _ = cv2.calcOpticalFlowPyrLK(gray, self._gray, fwd, None, **lk)
+        lk: dict[str, Any] = dict(
+            winSize=(cfg.win_size_px, cfg.win_size_px), maxLevel=cfg.pyramid_levels,
+            criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+        # OpenCV's stubs require nextPts, which the function allocates when given None
+        fwd, st_f, _ = cv2.calcOpticalFlowPyrLK(
+            self._gray, gray, prev, None, **lk)  # type: ignore[call-overload]
+        back, st_b, _ = cv2.calcOpticalFlowPyrLK(
+            gray, self._gray, fwd, None, **lk)  # type: ignore[call-overload]
         fb_err = np.linalg.norm((back - prev).reshape(-1, 2), axis=1)
         ok = (st_f.ravel() == 1) & (st_b.ravel() == 1) & (fb_err < cfg.fb_max_error_px)
         src, dst = prev.reshape(-1, 2)[ok], fwd.reshape(-1, 2)[ok]
@@ -83,19 +90,19 @@ class KltBoxTracker:
         if (inl.sum() < cfg.min_points or quality < cfg.min_inlier_ratio
                 or not 1.0 / cfg.max_scale_step <= scale <= cfg.max_scale_step):
             return self._lose()
-        self.box_xyxy = _move_box(self.box_xyxy, m, scale)
+        self.box_xyxy = box = _move_box(box, m, scale)
         self._gray = gray
         self._pts = dst[inl]
         if len(self._pts) < cfg.reseed_ratio * self._n_seeded:
-            self._pts = self._seed(gray, self.box_xyxy)
+            self._pts = self._seed(gray, box)
             self._n_seeded = len(self._pts)
-        return self.box_xyxy.copy(), float(quality)
+        return box.copy(), float(quality)
 
-    def _lose(self):
+    def _lose(self) -> tuple[None, float]:
         self.box_xyxy = None
         return None, 0.0
 
-    def _seed(self, gray, box_xyxy):
+    def _seed(self, gray: np.ndarray, box_xyxy: NDArray[np.float64]) -> np.ndarray:
         h, w = gray.shape[:2]
         x0, y0 = max(int(np.floor(box_xyxy[0])), 0), max(int(np.floor(box_xyxy[1])), 0)
         x1, y1 = min(int(np.ceil(box_xyxy[2])), w), min(int(np.ceil(box_xyxy[3])), h)
@@ -109,7 +116,8 @@ class KltBoxTracker:
         return np.zeros((0, 2), np.float32) if pts is None else pts.reshape(-1, 2)
 
 
-def _move_box(box_xyxy, m, scale):
+def _move_box(box_xyxy: NDArray[np.float64], m: NDArray[np.float64],
+              scale: float) -> NDArray[np.float64]:
     """Move the box centre with the similarity ``m`` and scale its sides; rotation is
     not representable by an axis-aligned box and is ignored."""
     c = np.array([(box_xyxy[0] + box_xyxy[2]) / 2.0, (box_xyxy[1] + box_xyxy[3]) / 2.0])

@@ -19,10 +19,15 @@ threshold (overlap measured as the share of the detection inside the region) is 
 
 import contextlib
 import io
+from typing import Any, Iterable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from uav_tilt_vision.boxes import box_area, box_iou
+
+# per-image arrays as callers pass them (numpy arrays or nested lists), or None
+Rows = Iterable[ArrayLike] | None
 
 IOU_THRESHOLDS = np.linspace(0.5, 0.95, 10)
 RECALL_POINTS = np.linspace(0.0, 1.0, 101)
@@ -31,7 +36,7 @@ AREA_RANGES = {'small': (0.0, 32.0 ** 2), 'medium': (32.0 ** 2, 96.0 ** 2),
                'large': (96.0 ** 2, 1e10)}   # px^2, COCO's, bounds inclusive as in COCOeval
 
 
-def mean_ap(preds, gts, ignores=None):
+def mean_ap(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, Any]:
     """``coco_map``'s result plus 'backend', with pycocotools if available."""
     try:
         import pycocotools  # noqa: F401
@@ -40,14 +45,14 @@ def mean_ap(preds, gts, ignores=None):
     return {**pycocotools_map(preds, gts, ignores), 'backend': 'pycocotools'}
 
 
-def as_rows(arrays, width, n=0):
+def as_rows(arrays: Rows, width: int, n: int = 0) -> list[np.ndarray]:
     """Per-image float arrays reshaped to (-1, width); ``n`` empty ones for None."""
     if arrays is None:
         return [np.zeros((0, width))] * n
     return [np.asarray(a, dtype=np.float64).reshape(-1, width) for a in arrays]
 
 
-def coco_map(preds, gts, ignores=None):
+def coco_map(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, Any]:
     """COCO bbox mAP (101-point interpolated AP).
 
     {'map50', 'map50_95', 'ap50_per_class': {class id: AP@0.5}, 'map50_by_area': {range:
@@ -70,13 +75,15 @@ def coco_map(preds, gts, ignores=None):
             'map50_by_area': by_area}
 
 
-def outside(boxes, area_rng):
+def outside(boxes: np.ndarray, area_rng: Sequence[float]) -> np.ndarray:
     """(N,) bool: the area (px^2) of an xyxy box is outside the inclusive ``area_rng``."""
     area = box_area(boxes)
     return (area < area_rng[0]) | (area > area_rng[1])
 
 
-def class_ap(preds, gts, ignores, cls, area_rng=(0.0, np.inf)):
+def class_ap(preds: Sequence[np.ndarray], gts: Sequence[np.ndarray],
+             ignores: Sequence[np.ndarray], cls: int,
+             area_rng: Sequence[float] = (0.0, np.inf)) -> np.ndarray | None:
     """AP of one class at every IoU threshold, shape (len(IOU_THRESHOLDS),).
 
     Only ground truth whose area is in ``area_rng`` counts; None when there is none.
@@ -99,11 +106,12 @@ def class_ap(preds, gts, ignores, cls, area_rng=(0.0, np.inf)):
         return None
     order = np.argsort(-np.concatenate(scores), kind='mergesort')
     tp = np.concatenate(matched, 1)[:, order]
-    ignored = np.concatenate(ignored, 1)[:, order]
-    return np.array([interpolated_ap(t[~i], n_gt) for t, i in zip(tp, ignored)])
+    ignored_sorted = np.concatenate(ignored, 1)[:, order]
+    return np.array([interpolated_ap(t[~i], n_gt) for t, i in zip(tp, ignored_sorted)])
 
 
-def match(det, gt, gt_ignored, crowd):
+def match(det: np.ndarray, gt: np.ndarray, gt_ignored: np.ndarray, crowd: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray]:
     """Greedy COCO matching of score-sorted detections to ground truth.
 
     ``gt_ignored`` and ``crowd`` are (M,) bool; a crowd region is ignored, overlaps as the
@@ -132,7 +140,7 @@ def match(det, gt, gt_ignored, crowd):
     return tp, ignored
 
 
-def interpolated_ap(tp, n_gt):
+def interpolated_ap(tp: np.ndarray, n_gt: int) -> float:
     """101-point interpolated AP from score-sorted true-positive flags and the gt count."""
     if len(tp) == 0:
         return 0.0
@@ -146,7 +154,7 @@ def interpolated_ap(tp, n_gt):
     return float(sampled.mean())
 
 
-def pycocotools_map(preds, gts, ignores=None):
+def pycocotools_map(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, Any]:
     """The same metrics computed by pycocotools' COCOeval (its default area ranges)."""
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
@@ -154,7 +162,8 @@ def pycocotools_map(preds, gts, ignores=None):
     preds, gts = as_rows(preds, 6), as_rows(gts, 5)
     ignores = as_rows(ignores, 5, len(gts))
     classes = sorted({int(c) for g in gts for c in g[:, 4]})
-    anns, dets = [], []
+    anns: list[dict[str, Any]] = []
+    dets: list[dict[str, Any]] = []
     for i, (p, g, ig) in enumerate(zip(preds, gts, ignores)):
         for rows, crowd in ((g, 0), (ig, 1)):
             for x1, y1, x2, y2, c in rows:

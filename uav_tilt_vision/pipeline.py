@@ -12,16 +12,19 @@ is after among look-alikes.
 import contextlib
 import dataclasses
 import time
+from typing import Any, Iterator, Protocol
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
 from uav_tilt_common.config import nested, param
 from uav_tilt_common.targets import OBJECT_CLASSES, TargetCandidate
 from uav_tilt_vision.boxes import box_iou
 from uav_tilt_vision.klt_tracker import KltBoxTracker, KltConfig
 from uav_tilt_vision.poi import find_poi
-from uav_tilt_vision.target_pose import estimate_target_pose, pose_quaternion_from_normal
+from uav_tilt_vision.target_pose import CameraIntrinsics, estimate_target_pose, \
+    pose_quaternion_from_normal
 
 STAGES = ('detector', 'tracker', 'poi', 'pose')
 MAX_CANDIDATES = 6
@@ -52,36 +55,47 @@ class FrameResult:
 
     stamp_s: float
     found: bool = False
-    p_cam: np.ndarray = None        # POI position
-    q_cam: np.ndarray = None        # (x, y, z, w) of the target frame, z = surface normal
-    covariance: np.ndarray = None   # 6x6: x, y, z, rot x, rot y, rot z
-    box_xyxy: np.ndarray = None     # target box (detected or tracked), image pixels
-    poi_px: tuple = None            # (u, v)
+    p_cam: np.ndarray | None = None        # POI position
+    q_cam: np.ndarray | None = None        # (x, y, z, w) of the target frame, z = normal
+    covariance: np.ndarray | None = None   # 6x6: x, y, z, rot x, rot y, rot z
+    box_xyxy: np.ndarray | None = None     # target box (detected or tracked), image pixels
+    poi_px: tuple[float, float] | None = None   # (u, v)
     detected: bool = False          # the detector ran on this frame
     tracked: bool = False           # the box came from the tracker
-    track_points: np.ndarray = None  # (N, 2) KLT points after this frame
-    candidates: list = dataclasses.field(default_factory=list)  # TargetCandidates, tracked 1st
-    timings_ms: dict = dataclasses.field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+    track_points: np.ndarray | None = None  # (N, 2) KLT points after this frame
+    candidates: list[TargetCandidate] = dataclasses.field(
+        default_factory=list)       # tracked first
+    timings_ms: dict[str, float] = dataclasses.field(
+        default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+
+
+class FrameDetector(Protocol):
+    """What the pipeline needs of a detector (uav_tilt_vision.backends has two)."""
+
+    def predict(self, images: Any, conf_thres: float = ..., iou_thres: float = ...) -> Any:
+        """(N, 6) [x1, y1, x2, y2, score, class] in image pixels for one RGB image."""
 
 
 class VisionPipeline:
     """Stateful per-frame processing; ``detector.predict(rgb) -> (N, 6)`` or None (no model)."""
 
-    def __init__(self, detector, intrinsics, config=None):
+    def __init__(self, detector: FrameDetector | None, intrinsics: CameraIntrinsics,
+                 config: VisionConfig | None = None) -> None:
         self.detector = detector
         self.intrinsics = intrinsics
         self.config = config or VisionConfig()
         self.target_class = OBJECT_CLASSES.index(self.config.target_class)
         self.tracker = KltBoxTracker(self.config.klt)
         self._since_detect = self.config.detect_every   # detect on the first frame
-        self._last_box = None       # the tracked box of the frame before
+        self._last_box: NDArray[np.float64] | None = None   # the tracked box of the frame before
         self._track_score = 0.0     # the detector's score of the tracked box
 
-    def process(self, rgb, depth_m, stamp_s):
+    def process(self, rgb: NDArray[np.uint8], depth_m: NDArray[np.floating[Any]],
+                stamp_s: float) -> FrameResult:
         """One frame: uint8 RGB (H, W, 3) and depth (H, W) metres -> :class:`FrameResult`."""
         res = FrameResult(stamp_s)
         gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-        boxes = None
+        boxes: list[tuple[NDArray[np.float64], float]] | None = None
         if self._since_detect < self.config.detect_every:
             tracked = self._track(gray, res)
             boxes = None if tracked is None else [(tracked, self._track_score)]
@@ -105,7 +119,10 @@ class VisionPipeline:
                 res.found = True
         return res
 
-    def _pose_in(self, rgb, depth_m, box, res, tracked):
+    def _pose_in(self, rgb: NDArray[np.uint8], depth_m: NDArray[np.floating[Any]],
+                 box: NDArray[np.float64], res: FrameResult, tracked: bool
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                            NDArray[np.float64]] | None:
         """(p_cam, n_cam, 6x6 covariance) of the POI in ``box``, or None."""
         with _timer(res, 'poi'):
             poi = find_poi(rgb, box)
@@ -117,7 +134,7 @@ class VisionPipeline:
             return estimate_target_pose(poi[0], poi[1], depth_m, self.intrinsics,
                                         self.config.pose_window_px, self.config.pixel_sigma_px)
 
-    def _track(self, gray, res):
+    def _track(self, gray: np.ndarray, res: FrameResult) -> NDArray[np.float64] | None:
         """The tracked box, or None when lost or of too low quality (then: re-detect)."""
         if self.tracker.lost:
             return None
@@ -129,12 +146,13 @@ class VisionPipeline:
         self._last_box = box
         return box
 
-    def _detect(self, rgb, gray, res):
+    def _detect(self, rgb: NDArray[np.uint8], gray: np.ndarray, res: FrameResult
+                ) -> list[tuple[NDArray[np.float64], float]]:
         """Run the detector; [(box, score)] of its target-class boxes, the one to track
         first (the track's continuation, else the best); start tracking that one."""
         self._since_detect = 0
         res.detected = self.detector is not None
-        boxes = []
+        boxes: list[tuple[NDArray[np.float64], float]] = []
         if self.detector is not None:
             with _timer(res, 'detector'):
                 dets = np.asarray(self.detector.predict(rgb, self.config.conf_thres,
@@ -158,7 +176,8 @@ class VisionPipeline:
         return boxes
 
 
-def check_frame(rgb, depth_m, intrinsics):
+def check_frame(rgb: np.ndarray, depth_m: np.ndarray, intrinsics: CameraIntrinsics
+                ) -> str | None:
     """Why a frame cannot be processed (a short reason), or None when it can."""
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         return 'rgb_format'
@@ -172,7 +191,7 @@ def check_frame(rgb, depth_m, intrinsics):
     return None
 
 
-def draw_debug(rgb, result):
+def draw_debug(rgb: NDArray[np.uint8], result: FrameResult) -> NDArray[np.uint8]:
     """Copy of ``rgb`` with the box (green: detected, yellow: tracked), KLT points, POI."""
     img = np.ascontiguousarray(rgb).copy()
     if result.box_xyxy is not None:
@@ -185,13 +204,13 @@ def draw_debug(rgb, result):
     if result.poi_px is not None:
         u, v = (int(round(c)) for c in result.poi_px)
         cv2.drawMarker(img, (u, v), (255, 0, 0), cv2.MARKER_CROSS, 9, 1)
-    if result.found:
+    if result.found and result.p_cam is not None:
         cv2.putText(img, f'{result.p_cam[2]:.2f} m', (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                     (255, 0, 0), 1, cv2.LINE_AA)
     return img
 
 
-def _on_image(box, gray):
+def _on_image(box: NDArray[np.float64], gray: np.ndarray) -> bool:
     """The box still overlaps the image by at least half its area."""
     h, w = gray.shape
     x0, y0, x1, y1 = box
@@ -200,7 +219,7 @@ def _on_image(box, gray):
 
 
 @contextlib.contextmanager
-def _timer(res, stage):
+def _timer(res: FrameResult, stage: str) -> Iterator[None]:
     """Adds the wall time of a ``with`` block to ``res.timings_ms[stage]``."""
     t0 = time.perf_counter()
     yield

@@ -3,6 +3,8 @@
 The POI is the centre of the bolt head: the darkest compact blob near the box
 centre, surrounded by a lighter, fairly uniform plate.
 """
+from typing import Any, Iterator, Sequence
+
 import cv2
 import numpy as np
 
@@ -15,7 +17,8 @@ MIN_REL_CONTRAST = 0.35     # (surround - blob) / surround mean grey
 MIN_CONTRAST_OVER_STD = 2.5  # surround - blob, in standard deviations of the surround
 
 
-def find_poi(rgb, box_xyxy):
+def find_poi(rgb: np.ndarray, box_xyxy: Sequence[float] | np.ndarray
+             ) -> tuple[float, float, float] | None:
     """POI ``(u_px, v_px, score)`` in image pixels inside ``box_xyxy``, or None.
 
     ``score`` in (0, 1] grows with the blob's compactness, contrast and centrality.
@@ -47,7 +50,7 @@ def find_poi(rgb, box_xyxy):
     return float(best[1][0] + cx0), float(best[1][1] + cy0), float(best[2])
 
 
-def _dark_mask(gray, box_c, bw, bh):
+def _dark_mask(gray: np.ndarray, box_c: np.ndarray, bw: float, bh: float) -> np.ndarray:
     """Otsu on the box's central half (plate + head, no background), opened and closed."""
     qx0, qx1 = int(box_c[0] - bw / 4), int(np.ceil(box_c[0] + bw / 4))
     qy0, qy1 = int(box_c[1] - bh / 4), int(np.ceil(box_c[1] + bh / 4))
@@ -55,7 +58,7 @@ def _dark_mask(gray, box_c, bw, bh):
     if centre.size < 16:
         return np.zeros_like(gray)  # box centre off the image: nothing to threshold
     thr, _ = cv2.threshold(centre.reshape(-1, 1), 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
-    mask = (gray <= thr).astype(np.uint8)
+    mask: np.ndarray = (gray <= thr).astype(np.uint8)
     # A small kernel: it removes specks and holes but must not carve thin dark strokes
     # (needles, letters) into compact blobs that look like a bolt head.
     k = max(int(round(0.01 * min(bw, bh))), 1) * 2 + 1
@@ -66,7 +69,8 @@ def _dark_mask(gray, box_c, bw, bh):
     return mask
 
 
-def _blobs(mask, gray, box_area):
+def _blobs(mask: np.ndarray, gray: np.ndarray, box_area: float
+           ) -> Iterator[dict[str, Any]]:
     """Dark components that pass the size, shape and contrast tests, with a quality in (0, 1]."""
     n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
     h, w = mask.shape
@@ -94,7 +98,7 @@ def _blobs(mask, gray, box_area):
                'quality': axis_ratio * solidity * min(contrast, 1.0)}
 
 
-def _surround_contrast(comp, gray, area):
+def _surround_contrast(comp: np.ndarray, gray: np.ndarray, area: float) -> float | None:
     """Relative contrast of a blob against the annulus [1.3 r, 2 r] around it, or None."""
     r = np.sqrt(area / np.pi)
     inner = cv2.dilate(comp, _disc(0.3 * r))
@@ -113,6 +117,6 @@ def _surround_contrast(comp, gray, area):
     return diff / ring_mean
 
 
-def _disc(radius_px):
+def _disc(radius_px: float) -> np.ndarray:
     k = 2 * max(int(round(radius_px)), 1) + 1
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))

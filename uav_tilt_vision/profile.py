@@ -6,6 +6,9 @@ element (scale and shift); activations, pooling, padding and upsampling only com
 or copy and count 0 MACs.
 """
 
+import os
+from typing import Any, Callable, Iterable, Sequence
+
 import torch
 from torch import nn
 
@@ -14,7 +17,7 @@ from uav_tilt_vision.detector import Detector, load_model
 TYPES = ('conv3x3', 'conv1x1', 'bn', 'other')
 
 
-def layer_type(module):
+def layer_type(module: nn.Module) -> str:
     """Category of a leaf module."""
     if isinstance(module, nn.Conv2d) and module.kernel_size in ((3, 3), (1, 1)):
         return f'conv{module.kernel_size[0]}x{module.kernel_size[1]}'
@@ -23,7 +26,7 @@ def layer_type(module):
     return 'other'
 
 
-def layer_macs(module, out):
+def layer_macs(module: nn.Module, out: torch.Tensor) -> int:
     """MACs of one call of a leaf module for a single image, given its output."""
     per_image = out.numel() // out.shape[0]
     if isinstance(module, nn.Conv2d):
@@ -34,16 +37,17 @@ def layer_macs(module, out):
     return 0
 
 
-def profile_model(model, input_shape):
+def profile_model(model: nn.Module, input_shape: Sequence[int]) -> dict[str, Any]:
     """Profile ``model`` on a zero input of ``input_shape`` (B, C, H, W).
 
     Returns {'params', 'macs', 'by_type': {type: {'params', 'macs', 'params_share',
     'macs_share'}}, 'layers': [{'name', 'type', 'params', 'macs'}]}.
     """
-    layers, handles = [], []
+    layers: list[dict[str, Any]] = []
+    handles = []
 
-    def hook(name):
-        def record(module, _inputs, out):
+    def hook(name: str) -> Callable[[nn.Module, Any, torch.Tensor], None]:
+        def record(module: nn.Module, _inputs: Any, out: torch.Tensor) -> None:
             layers.append({'name': name, 'type': layer_type(module),
                            'params': sum(p.numel() for p in module.parameters(recurse=False)),
                            'macs': layer_macs(module, out)})
@@ -63,7 +67,7 @@ def profile_model(model, input_shape):
         model.train(was_training)
     total_p = sum(r['params'] for r in layers)
     total_m = sum(r['macs'] for r in layers)
-    by_type = {}
+    by_type: dict[str, dict[str, float]] = {}
     for t in TYPES:
         p = sum(r['params'] for r in layers if r['type'] == t)
         m = sum(r['macs'] for r in layers if r['type'] == t)
@@ -72,7 +76,7 @@ def profile_model(model, input_shape):
     return {'params': total_p, 'macs': total_m, 'by_type': by_type, 'layers': layers}
 
 
-def report(model_paths=()):
+def report(model_paths: Iterable[str | os.PathLike[str]] = ()) -> dict[str, Any]:
     """Summaries (params, MACs, by_type) at 320x256 of the reference YOLOv3-tiny (80 classes),
     its stride-8 variant and each ``Detector`` checkpoint in ``model_paths``."""
     models = [('yolov3_tiny_ref_80cls', Detector(80, 1.0)),

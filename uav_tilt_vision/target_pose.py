@@ -17,6 +17,7 @@ normal is a convention, not a measurement, and gets ``UNOBSERVED_VAR_RAD2``.
 import dataclasses
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 UNOBSERVED_VAR_RAD2 = 1.0e3
@@ -36,15 +37,19 @@ class CameraIntrinsics:
     height: int
 
 
-def deproject(u_px, v_px, depth_m, K):
+def deproject(u_px: ArrayLike, v_px: ArrayLike, depth_m: ArrayLike,
+              K: CameraIntrinsics) -> NDArray[np.float64]:
     """Camera-frame points (..., 3) of pixels (u, v) at depth z (arrays broadcast)."""
     u, v, z = np.broadcast_arrays(np.asarray(u_px, float), np.asarray(v_px, float),
                                   np.asarray(depth_m, float))
     return np.stack([(u - K.cx) / K.fx * z, (v - K.cy) / K.fy * z, z], axis=-1)
 
 
-def estimate_target_pose(u_px, v_px, depth_m, K, window_px=10, pixel_sigma_px=0.5,
-                         depth_sigma_floor_m=1.0e-3, reject_rounds=2):
+def estimate_target_pose(u_px: float, v_px: float, depth_m: np.ndarray, K: CameraIntrinsics,
+                         window_px: int = 10, pixel_sigma_px: float = 0.5,
+                         depth_sigma_floor_m: float = 1.0e-3, reject_rounds: int = 2
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                    NDArray[np.float64]] | None:
     """Point ``p_cam_m``, unit normal ``n_cam`` (toward the camera) and 6x6 covariance.
 
     A plane is fitted by SVD to the valid depth pixels (finite, > 0) in a
@@ -74,7 +79,9 @@ def estimate_target_pose(u_px, v_px, depth_m, K, window_px=10, pixel_sigma_px=0.
     return p, n, _covariance(p, n, c, d, inliers, sigma2, K, pixel_sigma_px)
 
 
-def _robust_plane(pts, sigma_floor_m, rounds):
+def _robust_plane(pts: NDArray[np.float64], sigma_floor_m: float, rounds: int
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                             float] | None:
     """(normal toward the camera, centroid, inlier points, residual variance) or None.
 
     A least-median-of-squares seed keeps gross outliers (flying pixels, foreground
@@ -100,13 +107,15 @@ def _robust_plane(pts, sigma_floor_m, rounds):
     return n, c, q, sigma2
 
 
-def _inliers(abs_res, keep, sigma_floor_m):
+def _inliers(abs_res: NDArray[np.float64], keep: NDArray[np.bool_],
+             sigma_floor_m: float) -> NDArray[np.bool_]:
     """Residuals within 3 robust sigmas (MAD over ``keep``, floored at the sensor noise)."""
     scale = max(1.4826 * np.median(abs_res[keep]), sigma_floor_m)
     return abs_res < 3.0 * scale
 
 
-def _lmeds_inliers(pts, sigma_floor_m, n_trials=_LMEDS_TRIALS):
+def _lmeds_inliers(pts: NDArray[np.float64], sigma_floor_m: float,
+                   n_trials: int = _LMEDS_TRIALS) -> NDArray[np.bool_]:
     """Inliers of the plane through 3 sampled points with the least median residual."""
     rng = np.random.default_rng(0)  # fixed: the same image gives the same pose
     tri = pts[rng.integers(0, len(pts), (n_trials, 3))]
@@ -121,7 +130,9 @@ def _lmeds_inliers(pts, sigma_floor_m, n_trials=_LMEDS_TRIALS):
     return _inliers(abs_res[best], np.ones(len(pts), bool), sigma_floor_m)
 
 
-def _covariance(p, n, c, d, q, sigma2, K, pixel_sigma_px):
+def _covariance(p: NDArray[np.float64], n: NDArray[np.float64], c: NDArray[np.float64],
+                d: NDArray[np.float64], q: NDArray[np.float64], sigma2: float,
+                K: CameraIntrinsics, pixel_sigma_px: float) -> NDArray[np.float64]:
     dq = q - c
     scatter = dq.T @ dq
     evals, evecs = np.linalg.eigh(scatter)
@@ -147,7 +158,7 @@ def _covariance(p, n, c, d, q, sigma2, K, pixel_sigma_px):
     return 0.5 * (cov + cov.T)
 
 
-def pose_quaternion_from_normal(n_cam):
+def pose_quaternion_from_normal(n_cam: ArrayLike) -> NDArray[np.float64]:
     """Quaternion (x, y, z, w) of the target frame: z = n_cam, x = camera x projected on the
     surface (camera y when nearly parallel), y = z cross x (up for a level camera)."""
     z = np.asarray(n_cam, float)

@@ -6,9 +6,11 @@ seeded loader order and augmentation drawn from (seed, epoch, index).
 
 import json
 import math
+import os
 import random
 import subprocess
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence, TypeVar, cast
 
 import numpy as np
 import torch
@@ -19,8 +21,13 @@ from uav_tilt_vision.yolo_data import (HSV_GAINS, YoloDataset, collate, kmeans_a
                                        read_meta)
 from uav_tilt_vision.yolo_loss import YoloLoss, distill_loss
 
+if TYPE_CHECKING:
+    from uav_tilt_vision.backends import OnnxDetector, TorchDetector
 
-def progress(iterable, **kwargs):
+T = TypeVar('T')
+
+
+def progress(iterable: Iterable[T], **kwargs: Any) -> Iterable[T]:
     """tqdm progress bar when tqdm is installed, else the plain iterable."""
     try:
         from tqdm import tqdm
@@ -29,14 +36,14 @@ def progress(iterable, **kwargs):
     return tqdm(iterable, **kwargs)
 
 
-def resolve_device(device='auto'):
+def resolve_device(device: str = 'auto') -> torch.device:
     """'auto' -> CUDA when available, else CPU."""
     if device == 'auto':
         device = 'cuda' if torch.cuda.is_available() else 'cpu'
     return torch.device(device)
 
 
-def git_commit():
+def git_commit() -> str | None:
     """HEAD commit of the repository holding this file, or None."""
     try:
         res = subprocess.run(['git', 'rev-parse', 'HEAD'], cwd=Path(__file__).parent,
@@ -46,12 +53,12 @@ def git_commit():
     return res.stdout.strip() if res.returncode == 0 else None
 
 
-def card_path(weights_path):
+def card_path(weights_path: str | os.PathLike[str]) -> Path:
     """Model card JSON path beside the weights (same stem, .json)."""
     return Path(weights_path).with_suffix('.json')
 
 
-def num_classes_of(dataset, meta):
+def num_classes_of(dataset: YoloDataset, meta: dict[str, Any]) -> int:
     """Class count from meta.json 'classes', else the largest label + 1."""
     if meta.get('classes'):
         return len(meta['classes'])
@@ -59,11 +66,16 @@ def num_classes_of(dataset, meta):
     return int(labels.max()) + 1 if len(labels) else 1
 
 
-def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_SIZE, batch=16,
-          device='auto', lr=3e-3, weight_decay=5e-4, augment=True, hflip=False, anchors=None,
-          eval_dir=None, workers=0, log=print, model=None, crop=None, ema_decay=0.999,
-          scales=2, hsv=HSV_GAINS, teacher=None, distill_gain=1.0, card_extra=None,
-          bf16=False):
+def train(data_dir: str | os.PathLike[str], out_path: str | os.PathLike[str], epochs: int = 50,
+          seed: int = 0, width_mult: float = 0.25, img_size: Sequence[int] = IMG_SIZE,
+          batch: int = 16, device: str = 'auto', lr: float = 3e-3, weight_decay: float = 5e-4,
+          augment: bool = True, hflip: bool = False, anchors: Any = None,
+          eval_dir: str | os.PathLike[str] | None = None, workers: int = 0,
+          log: Callable[[str], Any] = print, model: Detector | None = None,
+          crop: Sequence[int] | None = None, ema_decay: float = 0.999, scales: int = 2,
+          hsv: Sequence[float] = HSV_GAINS, teacher: Detector | None = None,
+          distill_gain: float = 1.0, card_extra: dict[str, Any] | None = None,
+          bf16: bool = False) -> dict[str, Any]:
     """Train a ``Detector`` and write weights (``save_model``) plus a model card JSON beside them.
 
     ``anchors`` None = k-means on the training labels (defaults when too few boxes).
@@ -100,19 +112,22 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
                 anchors = DEFAULT_ANCHORS[scales]
         model = Detector(n_cls, width_mult, anchors=anchors, img_size=img_size, scales=scales)
     # channels_last: oneDNN's convolutions and their gradients run ~1.3x faster on CPU
-    model = model.to(dev, memory_format=torch.channels_last)
+    # (torch's stubs of Module.to leave out the memory_format it takes)
+    model = model.to(dev, memory_format=torch.channels_last)  # type: ignore[call-overload]
     if teacher is not None:
         check_teacher(teacher, model)
-        teacher = teacher.to(dev, memory_format=torch.channels_last).eval()
+        teacher = teacher.to(  # type: ignore[call-overload]
+            dev, memory_format=torch.channels_last).eval()
     loss_fn = YoloLoss(model.anchors).to(dev)
     loader = torch.utils.data.DataLoader(
         ds, batch_size=batch, shuffle=True, collate_fn=collate, num_workers=workers,
         generator=torch.Generator().manual_seed(seed), pin_memory=dev.type == 'cuda')
     # no weight decay on BN parameters and biases (1-D tensors)
     params = list(model.parameters())
-    opt = torch.optim.AdamW([{'params': [p for p in params if p.ndim > 1]},
-                             {'params': [p for p in params if p.ndim <= 1], 'weight_decay': 0}],
-                            lr=lr, weight_decay=weight_decay)
+    groups: list[dict[str, Any]] = [
+        {'params': [p for p in params if p.ndim > 1]},
+        {'params': [p for p in params if p.ndim <= 1], 'weight_decay': 0}]
+    opt = torch.optim.AdamW(groups, lr=lr, weight_decay=weight_decay)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=epochs * len(loader),
                                                 pct_start=0.15)
     ema = torch.optim.swa_utils.AveragedModel(model, avg_fn=ema_average(ema_decay),
@@ -121,7 +136,8 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     model.train()
     for epoch in progress(range(epochs), desc='train', unit='epoch'):
         ds.set_epoch(epoch)
-        total, parts = 0.0, {}
+        total = 0.0
+        parts: dict[str, float] = {}
         for images, targets in loader:
             images = images.to(dev, non_blocking=True, memory_format=torch.channels_last)
             with torch.autocast(dev.type, dtype=torch.bfloat16, enabled=bf16):
@@ -145,9 +161,10 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
         log(f'epoch {epoch + 1}/{epochs} loss {history[-1]:.4f} '
             + ' '.join(f'{k} {v / len(loader):.4f}' for k, v in parts.items()))
     # the anchors are a constant buffer: float rounding in the average would drift them
-    ema.module.anchors.copy_(model.anchors)
+    cast(Detector, ema.module).anchors.copy_(model.anchors)
     model.load_state_dict(ema.module.state_dict())
-    model = model.to(memory_format=torch.contiguous_format).eval()
+    model = model.to(  # type: ignore[call-overload]
+        memory_format=torch.contiguous_format).eval()
     card = {'data_dir': str(data_dir), 'data_seed': meta.get('seed'),
             'classes': meta.get('classes'), 'num_classes': n_cls, 'epochs': epochs,
             'seed': seed, 'width_mult': model.width_mult, 'img_size': list(model.img_size),
@@ -166,7 +183,7 @@ def train(data_dir, out_path, epochs=50, seed=0, width_mult=0.25, img_size=IMG_S
     return card
 
 
-def check_teacher(teacher, model):
+def check_teacher(teacher: Detector, model: Detector) -> None:
     """ValueError unless ``teacher``'s heads and anchors match ``model``'s (distillation)."""
     same = (teacher.num_classes == model.num_classes and teacher.img_size == model.img_size
             and teacher.anchors.shape == model.anchors.shape
@@ -175,13 +192,14 @@ def check_teacher(teacher, model):
         raise ValueError('teacher and model differ in classes, input size or anchors')
 
 
-def ema_average(decay, ramp_steps=500):
+def ema_average(decay: float, ramp_steps: int = 500
+                ) -> Callable[[torch.Tensor, torch.Tensor, Any], torch.Tensor]:
     """``AveragedModel`` update: EMA whose decay ramps up as ``decay * (1 - exp(-n / ramp))``
     (YOLOv5's ModelEMA), so that the random initialisation is forgotten quickly.
 
     Integer buffers (BatchNorm's batch counter) follow the model.
     """
-    def avg(averaged, current, n_averaged):
+    def avg(averaged: torch.Tensor, current: torch.Tensor, n_averaged: Any) -> torch.Tensor:
         if not averaged.is_floating_point():
             return current
         d = decay * (1.0 - math.exp(-float(n_averaged) / ramp_steps))
@@ -189,7 +207,9 @@ def ema_average(decay, ramp_steps=500):
     return avg
 
 
-def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
+def evaluate(model: 'Detector | TorchDetector | OnnxDetector', data_dir: str | os.PathLike[str],
+             conf_thres: float = 0.001, iou_thres: float = 0.6,
+             batch: int = 16) -> dict[str, Any]:
     """COCO-style mAP of ``model`` on a YOLO-format set (``metrics.mean_ap``).
 
     AP@0.5 per class is keyed by the class names of the set's meta.json where it has them.
@@ -201,7 +221,9 @@ def evaluate(model, data_dir, conf_thres=0.001, iou_thres=0.6, batch=16):
     maps a list of uint8 RGB images to one (N, 6) array each (``backends``).
     """
     ds = YoloDataset(data_dir)
-    preds, gts, ignores = [], [], []
+    preds: list[np.ndarray] = []
+    gts: list[np.ndarray] = []
+    ignores: list[np.ndarray] = []
     for start in progress(range(0, len(ds), batch), desc='eval', unit='batch'):
         images = [ds.read_rgb(i) for i in range(start, min(start + batch, len(ds)))]
         preds.extend(model.predict(images, conf_thres, iou_thres))

@@ -6,11 +6,12 @@ Every sub-command prints one JSON object on stdout (progress bars go to stderr).
 import argparse
 import json
 import sys
+from typing import Any, Sequence
 
 MODELS = 'models'
 
 
-def log_stderr(line):
+def log_stderr(line: str) -> None:
     """Progress lines go to stderr: stdout is the JSON result."""
     print(line, file=sys.stderr, flush=True)
 
@@ -67,7 +68,7 @@ def _profile(a):
     return report(a.model)
 
 
-def parser():
+def parser() -> argparse.ArgumentParser:
     """The argparse parser of the vision sub-commands."""
     ap = argparse.ArgumentParser(prog='uav-tilt vision', description=__doc__)
     ap.add_argument('--threads', type=int, default=0, help='torch CPU threads (0: default)')
@@ -142,7 +143,7 @@ def parser():
     return ap
 
 
-def register(sub):
+def register(sub: 'argparse._SubParsersAction[Any]') -> None:
     """Add ``uav-tilt vision ...``: everything after ``vision`` goes to :func:`main`."""
     p = sub.add_parser('vision', add_help=False, prefix_chars='\0',
                        help='detector data set, training, evaluation, compression, profile')
@@ -150,7 +151,7 @@ def register(sub):
     p.set_defaults(func=lambda a: main(a.args))
 
 
-def main(argv=None):
+def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv``, run the sub-command, print its JSON result; returns 0."""
     a = parser().parse_args(argv)
     if a.threads:

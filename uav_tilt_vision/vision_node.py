@@ -10,7 +10,9 @@ usable model the node keeps running and publishes "no target" for every frame.
 """
 import collections
 import dataclasses
+import os
 import time
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -26,9 +28,9 @@ from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.targets import no_target_covariance
-from uav_tilt_vision.backends import BACKENDS, load_detector
-from uav_tilt_vision.pipeline import STAGES, VisionConfig, VisionPipeline, check_frame, \
-    draw_debug
+from uav_tilt_vision.backends import BACKENDS, OnnxDetector, TorchDetector, load_detector
+from uav_tilt_vision.pipeline import STAGES, FrameResult, VisionConfig, VisionPipeline, \
+    check_frame, draw_debug
 from uav_tilt_vision.target_pose import CameraIntrinsics
 
 # Tried in this order, beside ``model_path``, when it cannot be loaded.
@@ -56,13 +58,14 @@ DYNAMIC = ('detect_every', 'conf_thres', 'iou_thres', 'min_track_quality', 'pose
            'pixel_sigma_px')
 
 
-def open_detector(model_path, backend):
+def open_detector(model_path: str | os.PathLike[str], backend: str
+                  ) -> tuple[TorchDetector | OnnxDetector | None, str]:
     """``(detector or None, note)``: the asked model, else the first loadable fallback
     beside it; ``note`` is one log line when anything differs from what was asked."""
     path = resources.locate(model_path)
     candidates = [(path, backend)] + [(path.parent / name, 'auto') for name in FALLBACK_MODELS
                                       if path.parent / name != path]
-    problems = []
+    problems: list[str] = []
     for candidate, kind in candidates:
         if not candidate.is_file():
             problems.append(f'{candidate.name} missing')
@@ -79,20 +82,21 @@ def open_detector(model_path, backend):
     return None, f'no usable model ({"; ".join(problems)}): publishing no target'
 
 
-def pose_msg(result, stamp):
+def pose_msg(result: FrameResult, stamp: Any) -> PoseWithCovarianceStamped:
     """target/pose of a FrameResult; covariance[0] = -1 when no target was found."""
     msg = PoseWithCovarianceStamped()
     msg.header.stamp = stamp
     msg.header.frame_id = names.FRAME_CAMERA
     pose = msg.pose.pose
-    if not result.found:
+    p_cam, q_cam, covariance = result.p_cam, result.q_cam, result.covariance
+    if not result.found or p_cam is None or q_cam is None or covariance is None:
         pose.orientation.w = 1.0
         msg.pose.covariance = no_target_covariance()
         return msg
-    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in result.p_cam)
+    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in p_cam)
     o = pose.orientation
-    o.x, o.y, o.z, o.w = (float(v) for v in result.q_cam)
-    msg.pose.covariance = result.covariance.astype(float).ravel()
+    o.x, o.y, o.z, o.w = (float(v) for v in q_cam)
+    msg.pose.covariance = covariance.astype(float).ravel()
     return msg
 
 
@@ -224,7 +228,7 @@ class VisionNode(Node):
             'vision', values, self.get_clock().now().to_msg(), level, message))
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     """Entry point of the vision_node executable."""
     return run_node(VisionNode, args, spin=spin_events)
 

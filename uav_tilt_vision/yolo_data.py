@@ -8,11 +8,14 @@ little visible to label, which evaluation ignores (COCO's crowd regions); an opt
 """
 
 import json
+import os
 from pathlib import Path
+from typing import Any, Iterable, Sequence
 
 import cv2
 import numpy as np
 import torch
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_vision.boxes import letterbox, wh_iou, xywh_to_xyxy, xyxy_to_xywh
 from uav_tilt_vision.detector import IMG_SIZE
@@ -26,13 +29,13 @@ IGNORE_CLASS = -1
 HSV_GAINS = (0.015, 0.5, 0.5)
 
 
-def read_meta(root):
+def read_meta(root: str | os.PathLike[str]) -> dict[str, Any]:
     """``DIR/meta.json`` as a dict ({} when absent)."""
     path = Path(root) / 'meta.json'
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
-def read_labels(path):
+def read_labels(path: str | os.PathLike[str]) -> NDArray[np.float64]:
     """(n, 5) float array [class, cx, cy, w, h] (normalised) from a label file; missing = empty."""
     path = Path(path)
     text = path.read_text().strip() if path.is_file() else ''
@@ -41,7 +44,7 @@ def read_labels(path):
     return np.array([line.split() for line in text.splitlines()], dtype=np.float64).reshape(-1, 5)
 
 
-def hsv_jitter(img, gains, rng):
+def hsv_jitter(img: np.ndarray, gains: Sequence[float], rng: np.random.Generator) -> np.ndarray:
     """Random hue/saturation/value gains (fractions, YOLOv5 style) on a uint8 RGB image."""
     r = rng.uniform(-1, 1, 3) * np.asarray(gains) + 1
     hue, sat, val = cv2.split(cv2.cvtColor(img, cv2.COLOR_RGB2HSV))
@@ -64,8 +67,10 @@ class YoloDataset(torch.utils.data.Dataset):
     (``random_crop``), at full scale: cheaper steps, same object sizes as at inference.
     """
 
-    def __init__(self, root, img_size=IMG_SIZE, augment=False, hflip=False,
-                 hsv=HSV_GAINS, seed=0, crop=None):
+    def __init__(self, root: str | os.PathLike[str], img_size: Sequence[int] = IMG_SIZE,
+                 augment: bool = False, hflip: bool = False,
+                 hsv: Sequence[float] = HSV_GAINS, seed: int = 0,
+                 crop: Sequence[int] | None = None) -> None:
         self.root = Path(root)
         self.images = sorted(p for p in (self.root / 'images').iterdir()
                              if p.suffix.lower() in IMG_EXTS)
@@ -75,23 +80,26 @@ class YoloDataset(torch.utils.data.Dataset):
         self.augment, self.hflip, self.hsv = augment, hflip, hsv
         self.seed, self.epoch, self.crop = seed, 0, crop
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.images)
 
-    def set_epoch(self, epoch):
+    def set_epoch(self, epoch: int) -> None:
         """Select the augmentation draw for this epoch."""
         self.epoch = epoch
 
-    def read_rgb(self, i):
+    def read_rgb(self, i: int) -> np.ndarray:
         """Original image i as uint8 RGB."""
-        return cv2.cvtColor(cv2.imread(str(self.images[i]), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        # an unreadable file (imread gives None) raises in cvtColor
+        bgr = cv2.imread(str(self.images[i]), cv2.IMREAD_COLOR)
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)  # type: ignore[arg-type]
 
-    def labels(self, i, folder='labels'):
+    def labels(self, i: int, folder: str = 'labels') -> NDArray[np.float64]:
         """Normalised labels of image i, (n, 5) [class, cx, cy, w, h]; ``folder='ignore'``
         gives its ignore regions instead."""
         return read_labels(self.root / folder / (self.images[i].stem + '.txt'))
 
-    def ground_truth(self, i, shape, folder='labels'):
+    def ground_truth(self, i: int, shape: Sequence[int], folder: str = 'labels'
+                     ) -> NDArray[np.float64]:
         """(n, 5) [x1, y1, x2, y2, class] in pixels of image i, whose (H, W, ...) is ``shape``;
         ``folder='ignore'`` gives its ignore regions instead."""
         h, w = shape[:2]
@@ -99,7 +107,7 @@ class YoloDataset(torch.utils.data.Dataset):
         xyxy = xywh_to_xyxy(lab[:, 1:] * [w, h, w, h])
         return np.concatenate([xyxy, lab[:, :1]], 1)
 
-    def load(self, i):
+    def load(self, i: int) -> tuple[np.ndarray, NDArray[np.float64]]:
         """Letterboxed uint8 RGB image and (n, 5) [class, cx, cy, w, h] in input pixels: the
         labels, then the ignore regions (class ``IGNORE_CLASS``)."""
         img = self.read_rgb(i)
@@ -111,7 +119,7 @@ class YoloDataset(torch.utils.data.Dataset):
         boxes = lab[:, 1:] * [w, h, w, h] * scale + [pad[0], pad[1], 0, 0]
         return out, np.concatenate([lab[:, :1], boxes], 1)
 
-    def __getitem__(self, i):
+    def __getitem__(self, i: int) -> tuple[torch.Tensor, torch.Tensor]:
         img, lab = self.load(i)
         if self.augment:
             rng = np.random.default_rng([self.seed, self.epoch, i])
@@ -128,13 +136,15 @@ class YoloDataset(torch.utils.data.Dataset):
         t[:, 1:] = torch.from_numpy(lab)
         return x, t
 
-    def label_wh(self):
+    def label_wh(self) -> NDArray[np.float64]:
         """All label sizes (n, 2) in input pixels (for anchor clustering)."""
         labs = (self.load(i)[1] for i in range(len(self)))
         return np.concatenate([lab[lab[:, 0] != IGNORE_CLASS, 3:5] for lab in labs], 0)
 
 
-def random_crop(img, lab, size, rng, min_kept=0.4):
+def random_crop(img: np.ndarray, lab: NDArray[np.float64], size: Sequence[int],
+                rng: np.random.Generator, min_kept: float = 0.4
+                ) -> tuple[np.ndarray, NDArray[np.float64]]:
     """A (w, h) window holding a random labelled object (anywhere, if none) and its labels.
 
     Boxes are clipped to the window; a label keeping less than ``min_kept`` of its area
@@ -159,7 +169,8 @@ def random_crop(img, lab, size, rng, min_kept=0.4):
     return np.ascontiguousarray(img[y0:y0 + h, x0:x0 + w]), out
 
 
-def collate(batch):
+def collate(batch: Iterable[tuple[torch.Tensor, torch.Tensor]]
+            ) -> tuple[torch.Tensor, torch.Tensor]:
     """Stack images; concatenate targets with column 0 = index in the batch."""
     images, targets = zip(*batch)
     for k, t in enumerate(targets):
@@ -167,7 +178,8 @@ def collate(batch):
     return torch.stack(images), torch.cat(targets, 0)
 
 
-def kmeans_anchors(wh, num_scales=2, per_scale=3, iters=300):
+def kmeans_anchors(wh: ArrayLike, num_scales: int = 2, per_scale: int = 3,
+                   iters: int = 300) -> NDArray[np.float64]:
     """Cluster box sizes with the 1 - IoU distance (YOLOv2) into detector-ordered anchors.
 
     Returns (num_scales, per_scale, 2) sorted so that scale 0 holds the largest

@@ -21,7 +21,9 @@ fine-tune a pruned model against the unpruned one).
 """
 
 import math
+from typing import Any, Sequence
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -31,7 +33,7 @@ from uav_tilt_vision.detector import STRIDES
 from uav_tilt_vision.yolo_data import IGNORE_CLASS
 
 
-def ciou(a, b, eps=1e-9):
+def ciou(a: torch.Tensor, b: torch.Tensor, eps: float = 1e-9) -> torch.Tensor:
     """Element-wise complete IoU of (N, 4) xywh boxes ``a`` and ``b`` (Zheng et al. 2020)."""
     a1, b1 = xywh_to_xyxy(a), xywh_to_xyxy(b)
     inter = ((torch.minimum(a1[:, 2], b1[:, 2]) - torch.maximum(a1[:, 0], b1[:, 0])).clamp(0)
@@ -49,7 +51,7 @@ def ciou(a, b, eps=1e-9):
     return iou - rho2 / (cw ** 2 + ch ** 2 + eps) - alpha * v
 
 
-def assign(targets, anchors, anchor_iou):
+def assign(targets: torch.Tensor, anchors: torch.Tensor, anchor_iou: float) -> torch.Tensor:
     """Match targets to anchors over all scales.
 
     ``targets``: (n, 6) [image, class, cx, cy, w, h] in input pixels; ``anchors``:
@@ -63,7 +65,7 @@ def assign(targets, anchors, anchor_iou):
     return mask.view(-1, s, a)
 
 
-def ignored_cells(regions, shape, stride):
+def ignored_cells(regions: torch.Tensor, shape: Sequence[int], stride: float) -> torch.Tensor:
     """Bool (B, H, W) grid: cells that could predict one of the ``regions`` ((n, 6) target
     rows [image, class, cx, cy, w, h], input pixels), whose centre lies inside one or that
     holds its centre."""
@@ -80,8 +82,11 @@ def ignored_cells(regions, shape, stride):
 class YoloLoss(nn.Module):
     """Callable ``loss(heads, targets) -> (total, {'box', 'obj', 'cls'})``."""
 
-    def __init__(self, anchors, anchor_iou=0.25, box_gain=0.05, obj_gain=1.0,
-                 cls_gain=0.5, balance=None):
+    anchors: torch.Tensor           # (scales, A, 2) in input pixels (a buffer)
+
+    def __init__(self, anchors: torch.Tensor | np.ndarray, anchor_iou: float = 0.25,
+                 box_gain: float = 0.05, obj_gain: float = 1.0, cls_gain: float = 0.5,
+                 balance: Sequence[float] | None = None) -> None:
         super().__init__()
         self.register_buffer('anchors', torch.as_tensor(anchors, dtype=torch.float32))
         self.anchor_iou = anchor_iou
@@ -89,7 +94,8 @@ class YoloLoss(nn.Module):
         self.balance = balance or (1.0,) * len(self.anchors)   # objectness weight per scale
         self.bce = nn.BCEWithLogitsLoss()
 
-    def forward(self, heads, targets):
+    def forward(self, heads: Sequence[torch.Tensor], targets: torch.Tensor
+                ) -> tuple[torch.Tensor, dict[str, float]]:
         """Total weighted loss and its detached components for one batch."""
         dev = heads[0].device
         targets = targets.to(dev)
@@ -127,7 +133,7 @@ class YoloLoss(nn.Module):
         return total, {k: float(v.detach()) for k, v in parts.items()}
 
 
-def bernoulli_kl(student_logits, teacher_logits):
+def bernoulli_kl(student_logits: torch.Tensor, teacher_logits: torch.Tensor) -> torch.Tensor:
     """Element-wise KL(teacher || student) of Bernoulli outputs given as logits (>= 0, and 0
     where they agree): the soft-target BCE less the teacher's own entropy."""
     target = teacher_logits.sigmoid()
@@ -135,7 +141,8 @@ def bernoulli_kl(student_logits, teacher_logits):
             - F.binary_cross_entropy_with_logits(teacher_logits, target, reduction='none'))
 
 
-def distill_loss(student_heads, teacher_heads, num_anchors, eps=1e-9):
+def distill_loss(student_heads: Sequence[torch.Tensor], teacher_heads: Sequence[torch.Tensor],
+                 num_anchors: int, eps: float = 1e-9) -> tuple[torch.Tensor, dict[str, float]]:
     """Output distillation from a teacher detector with the same heads (e.g. the unpruned
     model a pruned one came from): ``(total, {'d_obj', 'd_box', 'd_cls'})``.
 
@@ -145,7 +152,10 @@ def distill_loss(student_heads, teacher_heads, num_anchors, eps=1e-9):
     what the teacher says about box and class in a background cell, most of the grid, is
     noise that would drown the cells holding objects.
     """
-    l_obj = l_box = l_cls = 0.0
+    # sums that become tensors at the first head
+    l_obj: Any = 0.0
+    l_box: Any = 0.0
+    l_cls: Any = 0.0
     for hs, ht in zip(student_heads, teacher_heads):
         ps, pt = head_view(hs, num_anchors), head_view(ht.detach(), num_anchors)
         kl = bernoulli_kl(ps, pt)
