@@ -4,6 +4,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import ConfigError, from_dict
+from uav_tilt_common.pose import Pose
 from uav_tilt_common.state import VehicleState
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import frames
@@ -26,8 +27,7 @@ def _state(t_s, speed_m_s=1.0, yaw_rate=0.0):
 
 
 def _estimator(config=None):
-    R_base_cam, p_base_cam = frames.camera_pose_in_base(VEHICLE)
-    return TargetEstimator(config, R_base_cam, p_base_cam)
+    return TargetEstimator(config, VEHICLE.camera_in_base())
 
 
 def _fill(est, t_end_s, **kw):
@@ -38,10 +38,9 @@ def _fill(est, t_end_s, **kw):
 def _measurement_at(t_s, p_map=P_POI_MAP, n_map=N_MAP, **kw):
     """What a perfect camera sees at time ``t_s``: (p_cam, n_cam)."""
     s = _state(t_s, **kw)
-    R_base_cam, p_base_cam = frames.camera_pose_in_base(VEHICLE)
     R_map_base = Rotation.from_quat(s.q_map_base).as_matrix()
-    R_map_cam, p_map_cam = frames.compose(R_map_base, s.p_map, R_base_cam, p_base_cam)
-    return R_map_cam.T @ (p_map - p_map_cam), R_map_cam.T @ n_map
+    cam_map = (Pose(R_map_base, s.p_map) @ VEHICLE.camera_in_base()).inverse()
+    return cam_map.apply(p_map), cam_map.rotate(n_map)
 
 
 def test_latency_compensation_moving_vehicle():
@@ -70,7 +69,7 @@ def test_rotation_matrix_input_and_6x6_covariance():
     p_cam, n_cam = _measurement_at(0.4)
     R_map_t, _ = frames.target_frame_from_normal(P_POI_MAP, N_MAP)
     R_cam_map = Rotation.from_quat(_state(0.4).q_map_base).as_matrix() @ \
-        frames.camera_pose_in_base(VEHICLE)[0]
+        VEHICLE.camera_in_base().R
     R_cam_t = R_cam_map.T @ R_map_t
     assert est.add_measurement(0.4, p_cam, R_cam_t, np.eye(6).ravel() * 1e-4)
     np.testing.assert_allclose(est.estimate().normal_map, N_MAP, atol=1e-9)

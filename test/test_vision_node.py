@@ -16,9 +16,9 @@ from sensor_msgs.msg import CameraInfo, Image
 from ros_graph import REPO, start, stop
 from uav_tilt_common import names, resources, ros_msgs, ros_qos
 from uav_tilt_common.config import from_dict
+from uav_tilt_common.pose import Pose
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim.camera import CameraConfig
-from uav_tilt_sim.plant import camera_rotation_in_base
 from uav_tilt_sim.scenario import DEFAULT_SCENARIO
 from uav_tilt_vision.pipeline import FrameResult
 from uav_tilt_vision.vision_node import VisionNodeConfig, pose_msg
@@ -133,9 +133,8 @@ def camera_in_map(odom):
     R_map_base = Rotation.from_quat([pose.orientation.x, pose.orientation.y,
                                      pose.orientation.z, pose.orientation.w]).as_matrix()
     p_base = ros_msgs.vector_of(pose.position)
-    vehicle = VehicleParams()
-    return (p_base + R_map_base @ np.asarray(vehicle.camera_xyz_m),
-            R_map_base @ camera_rotation_in_base(vehicle.camera_pitch_rad))
+    camera = Pose(R_map_base, p_base) @ VehicleParams().camera_in_base()
+    return camera.p, camera.R
 
 
 def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, probe):

@@ -1,7 +1,18 @@
 """Physical parameters of the tilting-rotor H quadrotor, shared by plant and controller."""
 import dataclasses
 
+import numpy as np
+from scipy.spatial.transform import Rotation
+
 from uav_tilt_common.config import param
+from uav_tilt_common.pose import Pose
+
+# Optical axes (x right, y down, z forward) in FLU for a camera looking along +x_FLU.
+_R_FLU_OPTICAL = np.array([
+    [0.0, 0.0, 1.0],
+    [-1.0, 0.0, 0.0],
+    [0.0, -1.0, 0.0],
+])
 
 
 @dataclasses.dataclass
@@ -29,6 +40,13 @@ class VehicleParams:
     def hover_thrust_n(self) -> float:
         """Per-rotor thrust that holds the vehicle at zero tilt."""
         return self.mass_kg * GRAVITY / 4.0
+
+    def camera_in_base(self) -> Pose:
+        """Pose of ``camera_color_optical_frame`` in base_link: the camera looks along
+        +x_FLU, pitched down by ``camera_pitch_rad`` (a positive rotation about +y_FLU turns
+        x_FLU downwards), from ``camera_xyz_m``."""
+        R_pitch = Rotation.from_euler('y', self.camera_pitch_rad).as_matrix()
+        return Pose(R_pitch @ _R_FLU_OPTICAL, np.asarray(self.camera_xyz_m, dtype=float))
 
 
 GRAVITY = 9.80665

@@ -77,7 +77,7 @@ class ControllerCore:
         self.flight = FlightCore(vehicle, cfg.flight)
         # The mission turns the wanted push into a depth with the impedance law's own K_z.
         k_contact_z = self.flight.impedance.gains(contact=True)[0][2]
-        self.estimator = TargetEstimator(cfg.estimator, *frames.camera_pose_in_base(vehicle))
+        self.estimator = TargetEstimator(cfg.estimator, vehicle.camera_in_base())
         self.estimator.hint_map = cfg.site.target_hint_map()
         self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z,
                                drop_target=self.estimator.reset)

@@ -1,4 +1,4 @@
-"""Frame helpers for the mission layer (DESIGN section 2): camera mount, target frame t, yaw.
+"""Frame helpers for the mission layer (DESIGN section 2): target frame t, yaw, pitch.
 
 Rotations are 3x3 matrices R_a_b mapping vectors from frame b to frame a; positions p_a_b
 are the origin of b expressed in a.
@@ -6,31 +6,13 @@ are the origin of b expressed in a.
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.geometry import cross3, quat_to_matrix
-
-# Optical axes (x right, y down, z forward) in FLU for a camera looking along +x_FLU.
-_R_FLU_OPTICAL = np.array([
-    [0.0, 0.0, 1.0],
-    [-1.0, 0.0, 0.0],
-    [0.0, -1.0, 0.0],
-])
 
 _E_Z = np.array([0.0, 0.0, 1.0])
 # Below this horizontal norm a normal counts as vertical and the horizontal axis is
 # taken from map x, so that the frame stays deterministic.
 _VERTICAL_EPS = 1e-6
-
-
-def camera_pose_in_base(vehicle):
-    """Pose of ``camera_color_optical_frame`` in base_link: (R_base_cam, p_base_cam).
-
-    The camera looks along +x_FLU, pitched down by ``vehicle.camera_pitch_rad``
-    (a positive rotation about +y_FLU turns x_FLU downwards).
-    """
-    R_pitch = Rotation.from_euler('y', vehicle.camera_pitch_rad).as_matrix()
-    return R_pitch @ _R_FLU_OPTICAL, np.asarray(vehicle.camera_xyz_m, dtype=float).copy()
 
 
 def unit(v):
@@ -77,11 +59,6 @@ def quat_matrix(q):
     accepts too; a non-finite or zero one gives NaNs instead of raising."""
     q = np.asarray(q, dtype=float)
     return quat_to_matrix(q / math.sqrt(q @ q))
-
-
-def compose(R_a_b, p_a_b, R_b_c, p_b_c):
-    """Pose of c in a from the pose of b in a and of c in b: (R_a_c, p_a_c)."""
-    return R_a_b @ R_b_c, p_a_b + R_a_b @ p_b_c
 
 
 def to_frame(R_map_t, origin_map, p_map):

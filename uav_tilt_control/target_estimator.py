@@ -15,6 +15,7 @@ import numpy as np
 
 from uav_tilt_common.config import param
 from uav_tilt_common.geometry import quat_slerp, quat_to_matrix
+from uav_tilt_common.pose import Pose
 from uav_tilt_common.targets import is_no_target
 from uav_tilt_control import frames
 
@@ -48,12 +49,11 @@ class TargetEstimate(typing.NamedTuple):
 class TargetEstimator:
     """Latency-compensated, gated and filtered POI position and surface normal in map."""
 
-    def __init__(self, config=None, R_base_cam=np.eye(3), p_base_cam=np.zeros(3)):
-        """``R_base_cam``/``p_base_cam``: camera optical frame in base_link
-        (see :func:`frames.camera_pose_in_base`)."""
+    def __init__(self, config=None, camera_in_base=None):
+        """``camera_in_base``: the camera optical frame's :class:`Pose` in base_link
+        (:meth:`VehicleParams.camera_in_base`; identity if None)."""
         self.config = config or TargetEstimatorConfig()
-        self._R_base_cam = np.asarray(R_base_cam, dtype=float)
-        self._p_base_cam = np.asarray(p_base_cam, dtype=float)
+        self._camera_in_base = camera_in_base or Pose.identity()
         self._history = collections.deque(maxlen=self.config.history_size)
         self._p_map = None
         self._P = None              # position covariance of the estimate, m^2
@@ -85,8 +85,8 @@ class TargetEstimator:
         self._history.append((float(state.t_s), p_map, frames.unit(q)))
 
     def pose_at(self, t_s):
-        """Vehicle pose (R_map_base, p_map_base) at ``t_s``: linear position and slerp
-        attitude between the bracketing states, or None outside the history."""
+        """Vehicle :class:`Pose` in map at ``t_s``: linear position and slerp attitude
+        between the bracketing states, or None outside the history."""
         if not self._history:
             return None
         t_last, p_last, q_last = self._history[-1]
@@ -94,14 +94,14 @@ class TargetEstimator:
             if t_s - t_last > self.config.max_extrapolation_s:
                 return None
             # a frame slightly newer than the last odometry: the last pose is closest
-            return quat_to_matrix(q_last), p_last.copy()
+            return Pose(quat_to_matrix(q_last), p_last)
         i = bisect.bisect_right(self._history, t_s, key=lambda s: s[0])
         if i == 0:
             return None
         t0, p0, q0 = self._history[i - 1]
         t1, p1, q1 = self._history[i]
         u = (t_s - t0) / (t1 - t0)
-        return quat_to_matrix(quat_slerp(q0, q1, u)), p0 + u * (p1 - p0)
+        return Pose(quat_to_matrix(quat_slerp(q0, q1, u)), p0 + u * (p1 - p0))
 
     def add_measurement(self, stamp_s, p_cam, n_cam_or_R_cam_t, covariance=None):
         """Add a vision measurement in the camera optical frame, stamped with the image time.
@@ -138,8 +138,8 @@ class TargetEstimator:
         if pose is None:
             self.counters['rejected_no_pose'] += 1
             return False
-        R_map_cam, p_map_cam = frames.compose(*pose, self._R_base_cam, self._p_base_cam)
-        in_map = [p_map_cam + R_map_cam @ np.asarray(c[0], dtype=float) for c in checked]
+        map_cam = pose @ self._camera_in_base
+        in_map = [map_cam.apply(c[0]) for c in checked]
         reference = self._p_map if self._p_map is not None else self.hint_map
         k = 0
         if reference is not None:
@@ -149,9 +149,9 @@ class TargetEstimator:
                 self.counters['rejected_hint'] += 1
                 return False
         _, n_cam, cov = checked[k]
-        n_map = frames.unit(R_map_cam @ np.asarray(n_cam, dtype=float))
+        n_map = frames.unit(map_cam.rotate(n_cam))
         cov = None if cov is None else np.asarray(cov, dtype=float).ravel()
-        return self._update(stamp_s, in_map[k], n_map, self._meas_cov_map(cov, R_map_cam))
+        return self._update(stamp_s, in_map[k], n_map, self._meas_cov_map(cov, map_cam.R))
 
     @staticmethod
     def _finite(stamp_s, p_cam, n_cam, cov):

@@ -7,10 +7,10 @@ import dataclasses
 
 import numpy as np
 import pybullet as p
-from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import nested, param
-from uav_tilt_common.geometry import quat_to_matrix, rotor_wrench_matrix
+from uav_tilt_common.geometry import cross3, quat_to_matrix, rotor_wrench_matrix
+from uav_tilt_common.pose import Pose
 from uav_tilt_common.state import ActuatorCommand, VehicleState
 from uav_tilt_common.vehicle import GRAVITY, VehicleParams
 from uav_tilt_sim import camera as cam_mod
@@ -214,7 +214,7 @@ class Plant:
         w_map = np.asarray(ang)
         # Velocity of the base_link origin (rigid body: v_com + w x r).
         r = -R @ self._com_offset
-        v_map = np.asarray(lin) + _cross(w_map, r)
+        v_map = np.asarray(lin) + cross3(w_map, r)
         return VehicleState(self.t_s, np.asarray(pos) + r, np.asarray(quat), v_map,
                             R.T @ w_map)
 
@@ -236,7 +236,7 @@ class Plant:
             f = (c[9] * np.asarray(c[7]) + c[10] * np.asarray(c[11])
                  + c[12] * np.asarray(c[13]))
             force += f
-            torque += _cross(np.asarray(c[5]) - tip, f)
+            torque += cross3(np.asarray(c[5]) - tip, f)
         R = quat_to_matrix(self.state().q_map_base)
         return R.T @ force, R.T @ torque
 
@@ -273,9 +273,8 @@ class Plant:
         """(p_cam_map, R_map_cam) of the optical frame (z forward, x right, y down)."""
         s = self.state()
         R_map_base = quat_to_matrix(s.q_map_base)
-        R_base_cam = camera_rotation_in_base(self.vehicle.camera_pitch_rad)
-        p_cam = s.p_map + R_map_base @ np.asarray(self.vehicle.camera_xyz_m)
-        return p_cam, R_map_base @ R_base_cam
+        map_cam = Pose(R_map_base, s.p_map) @ self.vehicle.camera_in_base()
+        return map_cam.p, map_cam.R
 
     def render(self, lighting=None, segmentation=False):
         """Render the eye-in-hand camera: (rgb, depth_m, seg)."""
@@ -285,15 +284,3 @@ class Plant:
         rgb, depth, seg = cam_mod.render_with(self.renderer, self.scene, p_cam, R_map_cam,
                                               lighting, segmentation)
         return rgb, self.sensors.depth(depth), seg
-
-
-def camera_rotation_in_base(pitch_rad):
-    """R_base_cam: optical axes (z forward, x right, y down) in FLU, pitched down by pitch."""
-    optical = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-    return Rotation.from_euler('y', pitch_rad).as_matrix() @ optical
-
-
-def _cross(a, b):
-    """Cross product of two 3-vectors (np.cross costs ~10 us per call)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])

@@ -25,7 +25,6 @@ from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.targets import is_no_target
 from uav_tilt_common.vehicle import VehicleParams
-from uav_tilt_control.frames import camera_pose_in_base
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_sim.world import WALL_THICKNESS_M
 
@@ -173,7 +172,8 @@ class FoxgloveBridge(Node):
                                _sphere((0, 0, 0), 2 * v.tool_tip_radius_m, _color(1, 0.5, 0))]),
         ]
         self.ch_scene.log(fm.SceneUpdate(entities=entities))
-        R_cam, p_cam = camera_pose_in_base(v)
+        camera = v.camera_in_base()
+        R_cam, p_cam = camera.R, camera.p
         self.ch_tf.log(fm.FrameTransforms(transforms=[
             _transform(names.FRAME_BASE, names.FRAME_EE, (v.tool_tip_x_m, 0, 0), (0, 0, 0, 1),
                        stamp),

@@ -32,10 +32,10 @@ import pybullet as p
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from uav_tilt_common.pose import Pose
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim import textures
 from uav_tilt_sim.camera import CameraConfig, Lighting, make_renderer
-from uav_tilt_sim.plant import camera_rotation_in_base
 from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
 from uav_tilt_sim.vehicle_body import create_vehicle
 from uav_tilt_sim.visuals import BOX, Scene, Visual, apply_texture, create_static_body
@@ -174,8 +174,8 @@ def add_vehicle(scene: Scene, eye: np.ndarray, R_map_cam: np.ndarray,
                 vehicle: VehicleParams = VehicleParams()) -> int:
     """The vehicle posed so that its eye-in-hand camera is at (eye, R_map_cam); its body id."""
     client = scene.client
-    R_map_base = R_map_cam @ camera_rotation_in_base(vehicle.camera_pitch_rad).T
-    p_base = eye - R_map_base @ np.asarray(vehicle.camera_xyz_m)
+    base = (Pose(R_map_cam, eye) @ vehicle.camera_in_base().inverse())
+    R_map_base, p_base = base.R, base.p
     body = create_vehicle(client, vehicle, p_base.tolist(), 0.0, scene=scene).body
     p.resetBasePositionAndOrientation(body, p_base.tolist(),
                                       Rotation.from_matrix(R_map_base).as_quat().tolist(),
