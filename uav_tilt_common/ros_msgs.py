@@ -4,7 +4,7 @@ import math
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, Imu, JointState, PointCloud2, PointField
 
@@ -64,6 +64,16 @@ def state_from_odometry(msg):
         np.array([pose.position.x, pose.position.y, pose.position.z]), q,
         quat_to_matrix(q) @ v_base,
         np.array([twist.angular.x, twist.angular.y, twist.angular.z]))
+
+
+def pose_stamped_msg(p, q, stamp, frame_id=names.FRAME_MAP):
+    """geometry_msgs/PoseStamped of a position and an (x, y, z, w) quaternion."""
+    msg = PoseStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    _set_xyz(msg.pose.position, p)
+    _set_quat(msg.pose.orientation, q)
+    return msg
 
 
 def imu_msg(gyro, accel, q, stamp):

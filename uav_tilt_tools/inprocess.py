@@ -21,15 +21,19 @@ class Flight:
 
     ``vision(plant, t_s)`` (optional) returns ``(stamp_s, candidates)`` of a frame, as
     ``target/candidates`` carries them, or None when there is no frame this tick.
+    ``recorder(flight, sensors, command)`` (optional) sees every tick after the controller
+    (:class:`uav_tilt_tools.flight_bag.FlightBag` writes it as the node graph's topics).
     """
 
     def __init__(self, scenario, controller_config=None, vehicle=None, plant_config=None,
-                 vision=None):
+                 vision=None, recorder=None):
         self.vehicle = vehicle or VehicleParams()
         plant_config = plant_config or PlantCoreConfig(vehicle=self.vehicle)
         self.plant = Plant(plant_config, scenario)
         self.core = ControllerCore(self.vehicle, controller_config or ControllerConfig())
         self.vision = vision
+        self.recorder = recorder
+        self.sensors = None         # the plant's readings of the last tick
         self.odometry_enabled = True
         self.status = {}
         self.log = []               # one dict per tick, see :meth:`step`
@@ -47,7 +51,7 @@ class Flight:
     def step(self):
         """One 300 Hz tick: sensors -> controller -> plant."""
         plant, core = self.plant, self.core
-        sensors = plant.read_sensors()
+        sensors = self.sensors = plant.read_sensors()
         if self.odometry_enabled:
             core.on_odometry(sensors.odom)
         core.on_wrench(sensors.ee_force_n, sensors.ee_torque_nm)
@@ -62,6 +66,8 @@ class Flight:
         self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
                              push_n=self._true_push_n(sensors.in_contact), command=command))
+        if self.recorder is not None:
+            self.recorder(self, sensors, command)
         plant.step(command)
 
     def run(self, duration_s, until=None):
@@ -120,10 +126,7 @@ def mission_result(flight, contact_force_n):
     landed = [t for t, m in history[1:] if m == Mode.IDLE.value]
     result['mission_time_s'] = float(landed[-1] if landed else log[-1]['t_s'])
     if hold and world.target_poi_map is not None:
-        # along the surface: a wall that gives way lets the tip sink in along the normal
-        normal = world.R_map_target[:, 2]
-        offsets = np.array([entry['tip_map'] - world.target_poi_map for entry in hold])
-        errors = np.linalg.norm(offsets - np.outer(offsets @ normal, normal), axis=1)
+        errors = poi_errors_m([entry['tip_map'] for entry in hold], world)
         hold_push = np.array([entry['push_n'] for entry in hold])
         result.update(hold_tip_map=np.mean([e['tip_map'] for e in hold], axis=0).tolist(),
                       poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()),
@@ -132,6 +135,14 @@ def mission_result(flight, contact_force_n):
                                                               ** 2))),
                       hold_time_s=float(hold[-1]['t_s'] - hold[0]['t_s']))
     return result
+
+
+def poi_errors_m(tips_map, world):
+    """Distance [m] of each tool tip (map) from the world's POI along the surface: a wall
+    that gives way lets the tip sink in along the normal, which is no POI error."""
+    normal = world.R_map_target[:, 2]
+    offsets = np.asarray(tips_map, dtype=float).reshape(-1, 3) - world.target_poi_map
+    return np.linalg.norm(offsets - np.outer(offsets @ normal, normal), axis=1)
 
 
 def _first_touch_peak(log, push, window_s=0.25):
@@ -146,13 +157,13 @@ def _first_touch_peak(log, push, window_s=0.25):
 
 
 def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None,
-                plant_config=None, vision=None):
+                plant_config=None, vision=None, recorder=None):
     """Fly the inspection mission (``inspect`` at t = 0) until landed or ``duration_s``.
 
     Returns :func:`mission_result`'s dict.
     """
     config = controller_config or ControllerConfig()
-    flight = Flight(scenario, config, vehicle, plant_config, vision)
+    flight = Flight(scenario, config, vehicle, plant_config, vision, recorder)
     try:
         flight.step()
         ok, message = flight.core.inspect()
@@ -167,31 +178,42 @@ def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None
 class CameraVision:
     """Vision in the loop without ROS: renders the eye-in-hand camera at its rate and runs
     the VisionPipeline; each frame gives its target candidates stamped with the frame time
-    (as vision_node stamps target/candidates), an empty list included."""
+    (as vision_node stamps target/candidates), an empty list included. ``last_frame`` is
+    (stamp_s, FrameResult, rendered_ns, processed_ns) of the newest frame (wall clock ns
+    when the image was ready and when the pipeline was done with it), or None."""
 
     def __init__(self, pipeline, camera_rate_hz, control_rate_hz):
         self.pipeline = pipeline
         self.every = max(1, int(round(control_rate_hz / camera_rate_hz)))
         self.frames = 0
         self.found = 0
+        self.last_frame = None
 
     def __call__(self, plant, t_s):
         """(stamp_s, candidates) of this tick's frame, or None when none is rendered."""
         if plant.tick % self.every:
             return None
         rgb, depth, _ = plant.render()
+        rendered_ns = time.time_ns()
         result = self.pipeline.process(rgb, depth, t_s)
+        self.last_frame = (t_s, result, rendered_ns, time.time_ns())
         self.frames += 1
         self.found += int(result.found)
         return t_s, result.candidates
 
 
-def camera_vision(plant_config, model_path, backend='auto', vision_config=None):
-    """A :class:`CameraVision` with the detector at ``model_path`` and the plant's camera."""
+def camera_vision(plant_config, model_path, backend='auto', vision_config=None, threads=0):
+    """A :class:`CameraVision` with the detector at ``model_path`` and the plant's camera;
+    ``threads`` (0: the libraries' defaults) sizes the detector's thread pool and
+    OpenCV's (process-wide), e.g. to the one CPU a campaign run gets."""
     from uav_tilt_vision.backends import load_detector
     from uav_tilt_vision.pipeline import VisionPipeline
     from uav_tilt_vision.target_pose import CameraIntrinsics
+    if threads:
+        import cv2
+        cv2.setNumThreads(threads)
     cam = plant_config.camera
     intrinsics = CameraIntrinsics(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
-    pipeline = VisionPipeline(load_detector(model_path, backend), intrinsics, vision_config)
+    pipeline = VisionPipeline(load_detector(model_path, backend, threads), intrinsics,
+                              vision_config)
     return CameraVision(pipeline, cam.rate_hz, plant_config.control_hz)
