@@ -46,8 +46,9 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=DURATION_S,
     config = from_dict(ControllerConfig, values)
     plant_config, vision = PlantCoreConfig(), None
     if target_source == 'vision':
-        from uav_tilt_vision.vision_node import REPO, VisionNodeConfig
-        vision = camera_vision(plant_config, model_path or REPO / VisionNodeConfig().model_path,
+        from uav_tilt_common.resources import locate
+        from uav_tilt_vision.vision_node import VisionNodeConfig
+        vision = camera_vision(plant_config, model_path or locate(VisionNodeConfig().model_path),
                                threads=threads)
     bag = None
     if record is not None:

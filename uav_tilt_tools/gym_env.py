@@ -228,10 +228,15 @@ class ContactInspectionEnv(gym.Env):
         return setpoint
 
     def _truth(self):
-        """(true push [N], POI error along the surface [m]) of the last tick."""
-        from uav_tilt_tools.inprocess import poi_errors_m
-        entry = self.flight.log[-1]
-        return entry['push_n'], float(poi_errors_m(entry['tip_map'], self.flight.plant.world)[0])
+        """(push [N], POI error along the surface [m]) of the last tick, as the mission's
+        metrics measure them (:mod:`uav_tilt_tools.mission_metrics`): the F/T force along
+        the true normal, the true tip's distance from the true POI."""
+        from uav_tilt_tools.mission_metrics import poi_errors_m, push_along_normal
+        entry, world = self.flight.log[-1], self.flight.plant.world
+        push = push_along_normal(quat_to_matrix(entry['q_map_base']), entry['ft_force_ee_n'],
+                                 world.R_map_target)
+        poi = poi_errors_m(entry['tip_map'], world.target_poi_map, world.R_map_target[:, 2])
+        return push, float(poi[0])
 
     def _tick_reward(self):
         if self.flight.log[-1]['mode'] != Mode.HOLD.value:

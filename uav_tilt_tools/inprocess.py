@@ -14,6 +14,7 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.mission import Mode
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
+from uav_tilt_tools.mission_metrics import mission_summary, push_along_normal
 
 
 class Flight:
@@ -65,7 +66,8 @@ class Flight:
         truth = plant.state()
         self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
-                             push_n=self._true_push_n(sensors.in_contact), command=command))
+                             push_n=self._true_push_n(sensors.in_contact),
+                             ft_force_ee_n=sensors.ee_force_n, command=command))
         if self.recorder is not None:
             self.recorder(self, sensors, command)
         plant.step(command)
@@ -96,53 +98,39 @@ class Flight:
         return float((R_map_base @ force_ee) @ world.R_map_target[:, 2])
 
 
-def mission_result(flight, contact_force_n):
-    """Summary of an inspection run (DESIGN section 7 ``summary.json`` names), plus the
-    mode history, where a failsafe fired and the first touch's peak push."""
+def mission_result(flight):
+    """Summary of an inspection run: :func:`mission_metrics.mission_summary` of the log
+    (the F/T reading and the truth of each tick), with the failsafe reason and where it
+    fired, the history of modes, the first touch's true peak push, the target confirmed
+    for the approach and the mean tool tip over HOLD."""
     log = flight.log
-    modes = [entry['mode'] for entry in log]
-    history = [(log[0]['t_s'], modes[0])] + [
-        (log[i]['t_s'], modes[i]) for i in range(1, len(log)) if modes[i] != modes[i - 1]]
-    hold = [entry for entry in log if entry['mode'] == Mode.HOLD.value]
-    push = np.array([entry['push_n'] for entry in log])
+    modes = [(entry['t_s'], entry['mode']) for entry in log]
+    history = [modes[0]] + [modes[i] for i in range(1, len(modes))
+                            if modes[i][1] != modes[i - 1][1]]
     world = flight.plant.world
+    push = ([push_along_normal(quat_to_matrix(e['q_map_base']), e['ft_force_ee_n'],
+                               world.R_map_target) for e in log]
+            if world.R_map_target is not None else [])
+    normal = world.R_map_target[:, 2] if world.R_map_target is not None else None
+    t_log = [e['t_s'] for e in log]
+    result = mission_summary(modes, flight.status, t_log, push, t_log,
+                             [e['tip_map'] for e in log], world.target_poi_map, normal)
     reason = flight.status.get('failsafe_reason', '')
     events = flight.core.mission.events
     fired = [e for e in events if reason and e['reason'] == reason]
     approached = [e['target_map'] for e in events if e['mode'] == Mode.APPROACH.value
                   and e['previous'] == Mode.SEARCH.value]
-    result = dict(success=bool(flight.status.get('success', False)),
-                  contact_lost=int(flight.status.get('contact_lost', 0)),
-                  failsafe_reason=reason,
+    hold = [e['tip_map'] for e in log if e['mode'] == Mode.HOLD.value]
+    result.update(failsafe_reason=reason,
                   failsafe_where=({'mode': fired[-1]['previous'], 'phase': fired[-1]['phase']}
                                   if fired else None),
-                  max_force_n=float(push.max()) if push.size else 0.0,
-                  first_touch_peak_n=_first_touch_peak(log, push),
+                  first_touch_peak_n=_first_touch_peak(log, np.array([e['push_n']
+                                                                      for e in log])),
                   mode_history=[(float(t), m) for t, m in history],
-                  poi_error_m=None, poi_error_max_m=None, force_mean_n=None,
-                  force_rms_error_n=None, hold_time_s=0.0, hold_tip_map=None,
-                  sim_time_s=float(flight.t_s), ticks=len(log),
-                  confirmed_target_map=approached[0] if approached else None)
-    landed = [t for t, m in history[1:] if m == Mode.IDLE.value]
-    result['mission_time_s'] = float(landed[-1] if landed else log[-1]['t_s'])
-    if hold and world.target_poi_map is not None:
-        errors = poi_errors_m([entry['tip_map'] for entry in hold], world)
-        hold_push = np.array([entry['push_n'] for entry in hold])
-        result.update(hold_tip_map=np.mean([e['tip_map'] for e in hold], axis=0).tolist(),
-                      poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()),
-                      force_mean_n=float(hold_push.mean()),
-                      force_rms_error_n=float(np.sqrt(np.mean((hold_push - contact_force_n)
-                                                              ** 2))),
-                      hold_time_s=float(hold[-1]['t_s'] - hold[0]['t_s']))
+                  hold_tip_map=np.mean(hold, axis=0).tolist() if hold else None,
+                  confirmed_target_map=approached[0] if approached else None,
+                  sim_time_s=float(flight.t_s), ticks=len(log))
     return result
-
-
-def poi_errors_m(tips_map, world):
-    """Distance [m] of each tool tip (map) from the world's POI along the surface: a wall
-    that gives way lets the tip sink in along the normal, which is no POI error."""
-    normal = world.R_map_target[:, 2]
-    offsets = np.asarray(tips_map, dtype=float).reshape(-1, 3) - world.target_poi_map
-    return np.linalg.norm(offsets - np.outer(offsets @ normal, normal), axis=1)
 
 
 def _first_touch_peak(log, push, window_s=0.25):
@@ -170,7 +158,7 @@ def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None
         if not ok:
             raise RuntimeError(f'inspect refused: {message}')
         flight.run(duration_s, until=lambda f: f.core.mission.mode == Mode.IDLE)
-        return mission_result(flight, config.contact_force)
+        return mission_result(flight)
     finally:
         flight.close()
 
