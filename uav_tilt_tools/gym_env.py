@@ -11,7 +11,10 @@ as the nodes and ``uav-tilt fly``). Each reset draws a world of the campaign
 (:func:`uav_tilt_tools.campaign.random_draw`, seeded from the environment's generator) and
 lets the mission fly takeoff, search and approach by itself; the episode starts when the
 mission reaches the wall (it enters CONTACT at the stand-off, facing the target) and covers
-the touch: CONTACT (close in, creep until the tool feels the wall, press) and HOLD.
+the touch: CONTACT (close in, creep until the tool feels the wall, press) and HOLD. With
+``start='takeoff'`` the episode is the whole mission from the ground instead (the action
+acts near the wall only; a reset is then a fraction of a second instead of the flight-in's
+tens of simulated seconds).
 
 **Action: an offset of the impedance law's setpoint, not its gains.** Box(-1, 1, (3,)):
 a shift of the desired position lambda_d along the wall (x_t, y_t, up to ``max_offset_m``)
@@ -64,6 +67,7 @@ from uav_tilt_sim.plant import PlantCoreConfig
 
 ENV_ID = 'uav_tilt/ContactInspection-v0'
 PHASES = ('close', 'touch', 'press', 'hold', 'other')
+STARTS = ('wall', 'takeoff')
 ACTING = (Mode.CONTACT, Mode.HOLD, Mode.TARGET_LOST)   # modes the action offsets
 LIMIT_M, LIMIT_M_S, LIMIT_N, LIMIT_NM = 20.0, 20.0, 200.0, 20.0   # observation bounds
 
@@ -73,6 +77,7 @@ class ContactEnvConfig:
     """Options of ContactInspection-v0 (``gymnasium.make(ENV_ID, **options)``)."""
 
     action_rate_hz: float = param(30.0, lo=1.0, hi=300.0)  # a whole number of control ticks
+    start: str = param('wall', choices=STARTS)          # where an episode begins
     camera: bool = param(False)                         # the camera image in the observation
     target_source: str = param('ground_truth', choices=TARGET_SOURCES)
     model_path: str = param('')                         # vision: '' = the deployed detector
@@ -189,7 +194,8 @@ class ContactInspectionEnv(gym.Env):
 
     # --- the episode ------------------------------------------------------------------
     def _fly_in(self, world_seed):
-        """A new flight in world ``world_seed`` flown to the wall; False if it got none."""
+        """A new flight in world ``world_seed`` (flown to the wall unless it starts at the
+        takeoff); False if it got none."""
         from uav_tilt_tools.campaign import random_draw
         from uav_tilt_tools.fly import site_overrides
         from uav_tilt_tools.inprocess import Flight, camera_vision
@@ -208,11 +214,13 @@ class ContactInspectionEnv(gym.Env):
         self.flight = flight = Flight(scenario, config, plant_config=self.plant_config,
                                       vision=vision)
         self._offset_t = np.zeros(3)
-        self._frame = None
+        self._frame = self._setpoint = None
         flight.core.setpoint_hook = self._offset_setpoint
         flight.step()
         if not flight.core.inspect()[0]:
             return False
+        if self.cfg.start == 'takeoff':      # once the controller has a setpoint
+            return flight.run(1.0, until=lambda f: self._setpoint is not None)
         mission = flight.core.mission
         flight.run(self.cfg.flight_in_s, until=lambda f: mission.mode in (Mode.CONTACT,
                                                                           Mode.IDLE)
