@@ -26,8 +26,7 @@ def ray_runs(run_one, jobs, workers=None, address=None):
     try:
         import ray
     except ImportError:
-        raise CampaignError("--backend ray needs Ray: pip install 'uav_tilt[ray]' "
-                            "(or -r requirements-ray.txt)") from None
+        raise CampaignError("--backend ray needs Ray: pip install 'uav_tilt[ray]'") from None
     started = not ray.is_initialized()
     if started:
         # campaigns run on clusters without internet access: no usage reports
@@ -35,8 +34,7 @@ def ray_runs(run_one, jobs, workers=None, address=None):
         if address is not None:
             ray.init(address=address, logging_level=logging.WARNING)
         else:
-            ray.init(num_cpus=workers or os.cpu_count() or 1, include_dashboard=False,
-                     object_store_memory=OBJECT_STORE_BYTES, logging_level=logging.WARNING)
+            _init_local(ray, workers or os.cpu_count() or 1)
     task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(run_one)
     pending = {task.options(name=f'campaign run {job["index"]}').remote(job): job['index']
                for job in jobs}
@@ -57,3 +55,20 @@ def ray_runs(run_one, jobs, workers=None, address=None):
             ray.cancel(ref, force=True)
         if started:
             ray.shutdown()
+
+
+def _init_local(ray, cpus):
+    """A local Ray of ``cpus`` CPUs whose workers import the uav_tilt this process runs,
+    installed or not (they inherit the environment of the raylet started here; a
+    runtime_env would cost seconds per worker)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    before = os.environ.get('PYTHONPATH')
+    os.environ['PYTHONPATH'] = os.pathsep.join(p for p in (root, before) if p)
+    try:
+        ray.init(num_cpus=cpus, include_dashboard=False, object_store_memory=OBJECT_STORE_BYTES,
+                 logging_level=logging.WARNING)
+    finally:
+        if before is None:
+            del os.environ['PYTHONPATH']
+        else:
+            os.environ['PYTHONPATH'] = before
