@@ -21,6 +21,11 @@ def test_check_env_passes_with_the_camera():
         obs, _ = env.reset(seed=1)
         assert obs['image'].shape == env.observation_space['image'].shape
         assert obs['image'].std() > 0            # a rendered view, not a blank
+        # an episode from the ground flies: the takeoff is no crash
+        for _ in range(30):
+            _, reward, terminated, truncated, info = env.step(env.action_space.sample())
+            assert not terminated and reward == 0.0, info
+        assert info['mode'] not in ('IDLE', 'WAITING_FOR_SENSORS')
     finally:
         env.close()
 

@@ -47,10 +47,10 @@ the mission's (force_rms_error_n / force_scale_n)^2 and poi_error_m / poi_scale_
 
 **Termination**: the hold completed (success); a failsafe of the mission (force limit, no
 contact, target lost, stale odometry), the contact lost in HOLD, a push above the force
-limit, the vehicle below ``ground_clearance_m`` or tilted past ``max_tilt_deg``: each a
-failure, rewarded ``-failure_penalty``. Truncation after ``episode_s`` of simulated time.
-``info`` has the world seed, the mode and phase, the true push and POI error, and at the
-end the ``outcome``.
+limit, the vehicle below ``ground_clearance_m`` near the wall or tilted past
+``max_tilt_deg``: each a failure, rewarded ``-failure_penalty``. Truncation after
+``episode_s`` of simulated time. ``info`` has the world seed, the mode and phase, the
+push and POI error, and at the end the ``outcome``.
 """
 import dataclasses
 import math
@@ -62,7 +62,7 @@ from gymnasium import spaces
 from uav_tilt_common.config import ConfigError, from_dict, nested, param, to_flat
 from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_control.controller_core import TARGET_SOURCES, ControllerConfig
-from uav_tilt_control.mission import Mode
+from uav_tilt_control.mission import NEAR_WALL, Mode
 from uav_tilt_sim.plant import PlantCoreConfig
 
 ENV_ID = 'uav_tilt/ContactInspection-v0'
@@ -267,7 +267,9 @@ class ContactInspectionEnv(gym.Env):
         if flight.log[-1]['push_n'] > cfg.controller.mission.force_limit_n:
             return 'force_limit'
         truth = flight.plant.state()
-        if truth.p_map[2] < cfg.controller.mission.ground_z_m + cfg.ground_clearance_m:
+        near_wall = flight.core.mission.mode in NEAR_WALL   # (takeoff starts on the ground)
+        if near_wall and truth.p_map[2] < cfg.controller.mission.ground_z_m \
+                + cfg.ground_clearance_m:
             return 'ground'
         z_body = quat_to_matrix(truth.q_map_base)[:, 2]
         if math.degrees(math.acos(min(1.0, max(-1.0, z_body[2])))) > cfg.max_tilt_deg:
