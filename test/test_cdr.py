@@ -6,7 +6,7 @@ from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import Image, Imu, JointState
 
 from uav_tilt_common import cdr, names, ros_msgs
 from uav_tilt_common.state import VehicleState
@@ -90,6 +90,34 @@ def test_messages_serialized_by_rclpy_decode_to_their_fields(frame):
         ros_msgs.stamp_ns(stamp), frame, tuple(ros_msgs.vector_of(wrench.wrench.force)),
         tuple(ros_msgs.vector_of(wrench.wrench.torque)))
     assert cdr.decode_clock(serialize_message(Clock(clock=stamp))) == ros_msgs.stamp_ns(stamp)
+
+
+@pytest.mark.parametrize('frame', FRAMES)
+def test_images_both_ways(frame):
+    """Odd sizes and encodings of every length exercise each alignment of the fields."""
+    rng = np.random.default_rng(len(frame))
+    for height, width in ((1, 1), (3, 5), (240, 320), (7, 2)):
+        ns, stamp = _stamp(rng)
+        rgb = rng.integers(0, 256, size=(height, width, 3), dtype=np.uint8)
+        depth = rng.uniform(0.1, 20.0, size=(height, width)).astype(np.float32)
+        for array in (rgb, depth):
+            expected = ros_msgs.image_msg(array, stamp, frame)
+            data = ros_msgs.image_cdr(array, ns, frame)
+            assert deserialize_message(data, Image) == expected
+            got = cdr.decode_image(data)
+            assert (got.stamp_ns, got.frame_id) == (ns, frame)
+            np.testing.assert_array_equal(ros_msgs.array_of_image(got), array)
+        for encoding in ('', 'a', 'ab', 'abc', 'mono16'):
+            msg = Image(height=height, width=width, encoding=encoding, is_bigendian=1,
+                        step=2 * width, data=rng.bytes(2 * width * height))
+            msg.header.stamp, msg.header.frame_id = stamp, frame
+            got = cdr.decode_image(serialize_message(msg))
+            assert got == (ns, frame, height, width, encoding, 1, 2 * width,
+                           memoryview(bytes(msg.data)))
+    data = ros_msgs.image_cdr(depth, ns, frame)
+    for broken in (data[:-1], data[:len(data) // 2], data[:30]):
+        with pytest.raises(ValueError):
+            cdr.decode_image(broken)
 
 
 def test_big_endian_messages_decode_too():

@@ -7,7 +7,8 @@ from scipy.optimize import curve_fit
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_control.controller_core import ControllerConfig
-from uav_tilt_control.mission import MissionConfig, Mode
+from uav_tilt_common.modes import Mode
+from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.inprocess import Flight, run_mission
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
+from uav_tilt_common.modes import NOT_FLYING
 from uav_tilt_tools import gym_env
 from uav_tilt_tools.inprocess import mission_result
 
@@ -25,7 +26,7 @@ def test_check_env_passes_with_the_camera():
         for _ in range(30):
             _, reward, terminated, truncated, info = env.step(env.action_space.sample())
             assert not terminated and reward == 0.0, info
-        assert info['mode'] not in ('IDLE', 'WAITING_FOR_SENSORS')
+        assert info['mode'] not in NOT_FLYING
     finally:
         env.close()
 

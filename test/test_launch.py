@@ -233,9 +233,9 @@ def test_bad_arguments_start_nothing(tmp_path):
 
 
 @pytest.mark.parametrize('modes, success, result', [
-    (['WAITING_FOR_SENSORS', 'IDLE', 'TAKEOFF', 'HOLD', 'LAND', 'IDLE'], 'True', True),
-    (['IDLE', 'TAKEOFF', 'FAILSAFE_LAND', 'IDLE'], 'False', False),
-    (['IDLE', 'IDLE', 'TAKEOFF', 'HOVER'], 'False', None),
+    (['WAITING_FOR_SENSORS', 'IDLE', 'TAKEOFF', 'HOLD', 'LAND', 'IDLE'], True, True),
+    (['IDLE', 'TAKEOFF', 'FAILSAFE_LAND', 'IDLE'], False, False),
+    (['IDLE', 'IDLE', 'TAKEOFF', 'HOVER'], False, None),
 ])
 def test_mission_watch_waits_for_the_return_to_idle(modes, success, result):
     watch = MissionWatch()

@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 from uav_tilt_common.config import ConfigError
 from uav_tilt_common.state import VehicleState
 from uav_tilt_common.vehicle import VehicleParams
-from uav_tilt_control.mission import MinJerk, Mission, MissionConfig, Mode
+from uav_tilt_common.modes import Mode
+from uav_tilt_control.mission import MinJerk, Mission, MissionConfig
 from uav_tilt_control.target_estimator import TargetEstimate
 
 DT_S = 0.01

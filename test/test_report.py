@@ -17,7 +17,7 @@ from uav_tilt_common.state import VehicleState
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.controller_node import _loop_stats
-from uav_tilt_control.mission import Mode
+from uav_tilt_common.modes import Mode
 from uav_tilt_tools import recording, report
 from uav_tilt_tools.mcap_bag import McapBag
 from uav_tilt_tools.report_plots import write_plots
@@ -49,7 +49,7 @@ def controller_status(contact_force_n, loop_rate_hz=298.5):
     core.on_odometry(VehicleState(0.0, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]),
                                   np.zeros(3), np.zeros(3)))
     _, values = core.tick(0.0, np.zeros(3), 1.0 / 300)
-    values.update(_loop_stats([1.0 / loop_rate_hz] * 10, [1e-4] * 10))
+    values.update(_loop_stats([1.0 / loop_rate_hz] * 10, [1e-4] * 10, 1.0 / 300))
     return values
 
 

@@ -79,3 +79,43 @@ def test_the_vision_runtime_imports_without_the_simulator():
     out = subprocess.run([sys.executable, '-c', code], cwd=REPO, capture_output=True,
                          text=True, timeout=120)
     assert out.returncode != 0 and 'halted; None in sys.modules' in out.stderr
+
+
+def _string_literals(tree):
+    return {node.value for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str)}
+
+
+def _tests_covariance0(tree):
+    """Whether the module compares ``<...>cov...[0]`` with something (the no-target test)."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            for side in (node.left, *node.comparators):
+                if isinstance(side, ast.Subscript) and isinstance(side.slice, ast.Constant) \
+                        and side.slice.value == 0 and 'cov' in ast.unparse(side.value):
+                    return True
+    return False
+
+
+def test_the_shared_vocabulary_is_spelled_once():
+    """Mode names, the "no target" covariance and the object classes are defined in
+    uav_tilt_common and only used elsewhere (tests may spell them: they check the wire)."""
+    from uav_tilt_common.modes import NOT_FLYING, Mode
+
+    mode_names = {m.value for m in Mode} | set(NOT_FLYING)
+    offenders = []
+    for package in PACKAGES:
+        for path in _modules(package):
+            tree = ast.parse(path.read_text(), str(path))
+            home = package == 'uav_tilt_common'
+            spelled = _string_literals(tree) & mode_names
+            if spelled and (package, path.stem) != ('uav_tilt_common', 'modes'):
+                offenders.append(f'{package}.{path.stem} spells modes {sorted(spelled)}')
+            if _tests_covariance0(tree) and not home:
+                offenders.append(f'{package}.{path.stem} decodes the no-target covariance')
+            defined = {t.id for node in ast.walk(tree) if isinstance(node, ast.Assign)
+                       for t in node.targets if isinstance(t, ast.Name)}
+            if 'OBJECT_CLASSES' in defined and \
+                    (package, path.stem) != ('uav_tilt_common', 'targets'):
+                offenders.append(f'{package}.{path.stem} defines OBJECT_CLASSES')
+    assert not offenders

@@ -16,7 +16,11 @@ from uav_tilt_common.targets import CANDIDATE_FIELDS, candidates_from_array, can
 
 def to_stamp(t_s):
     """builtin_interfaces/Time of a time in seconds (exact for the plant's tick times)."""
-    ns = int(round(t_s * 1e9))
+    return stamp_of_ns(int(round(t_s * 1e9)))
+
+
+def stamp_of_ns(ns):
+    """builtin_interfaces/Time of integer nanoseconds."""
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
@@ -157,25 +161,35 @@ def actuator_msg(thrusts_n, tilts_rad, stamp):
     return msg
 
 
+def _image_layout(array):
+    """(encoding, step, contiguous little-endian data) of an rgb8 or 32FC1 image array."""
+    if array.ndim == 3:
+        return 'rgb8', int(array.shape[1]) * 3, np.ascontiguousarray(array, dtype=np.uint8)
+    return '32FC1', int(array.shape[1]) * 4, np.ascontiguousarray(array, dtype='<f4')
+
+
 def image_msg(array, stamp, frame_id=names.FRAME_CAMERA):
     """sensor_msgs/Image: rgb8 for HxWx3 uint8, 32FC1 for HxW float32."""
     msg = Image()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
     msg.height, msg.width = int(array.shape[0]), int(array.shape[1])
-    if array.ndim == 3:
-        msg.encoding, msg.step = 'rgb8', msg.width * 3
-        data = np.ascontiguousarray(array, dtype=np.uint8)
-    else:
-        msg.encoding, msg.step = '32FC1', msg.width * 4
-        data = np.ascontiguousarray(array, dtype='<f4')
+    msg.encoding, msg.step, data = _image_layout(array)
     msg.is_bigendian = 0
     msg.data = data.tobytes()
     return msg
 
 
+def image_cdr(array, stamp_ns, frame_id=names.FRAME_CAMERA):
+    """The serialized form of :func:`image_msg` (see :mod:`cdr`)."""
+    encoding, step, data = _image_layout(array)
+    return cdr.encode_image(stamp_ns, frame_id, int(array.shape[0]), int(array.shape[1]),
+                            encoding, step, data.data)
+
+
 def array_of_image(msg):
-    """numpy view of an rgb8 or 32FC1 Image; raises ValueError on anything else."""
+    """numpy copy of an rgb8 or 32FC1 Image (a message or a :class:`cdr.CdrImage`); raises
+    ValueError on anything else."""
     if msg.encoding == 'rgb8':
         channels, dtype = 3, np.uint8
     elif msg.encoding == '32FC1':

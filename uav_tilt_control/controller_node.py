@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, JointState, PointCloud2
 from std_srvs.srv import Trigger
 
-from uav_tilt_common import cdr, names, ros_msgs, ros_qos
+from uav_tilt_common import cdr, modes, names, ros_msgs, ros_qos
 from uav_tilt_common.config import nested, param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
@@ -220,7 +220,7 @@ class ControllerNode(Node):
     # --- status -------------------------------------------------------------------------
     def on_status(self):
         """controller/status: mode, mission, saturation, rejected inputs, loop statistics."""
-        values = dict(self.status) or dict(mode='WAITING_FOR_SENSORS')
+        values = dict(self.status) or dict(mode=modes.WAITING_FOR_SENSORS)
         values.update(ticks=self.ticks, saturated_ticks=self.saturated_ticks,
                       target_source=self.cfg.target_source,
                       rejected_inputs=self.rejects.total)

@@ -8,13 +8,13 @@ on, the target frame t of the estimate (z_t = surface normal). References are qu
 """
 import collections
 import dataclasses
-import enum
 import math
 
 import numpy as np
 
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.geometry import matrix_to_euler_zyx
+from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
 from uav_tilt_control.impedance import ImpedanceConfig, contact_depth_for_force
 from uav_tilt_control.types import ImpedanceSetpoint
@@ -25,22 +25,6 @@ _MIN_SEGMENT_S = 1.0
 # Peak speed of a minimum-jerk segment is 1.875 * distance / duration.
 _MIN_JERK_PEAK = 1.875
 DEFAULT_CONTACT_FORCE_N = 5.0
-
-
-class Mode(str, enum.Enum):
-    """Mission modes (the value is what status reports)."""
-
-    IDLE = 'IDLE'
-    TAKEOFF = 'TAKEOFF'
-    HOVER = 'HOVER'
-    SEARCH = 'SEARCH'
-    APPROACH = 'APPROACH'
-    CONTACT = 'CONTACT'
-    HOLD = 'HOLD'
-    TARGET_LOST = 'TARGET_LOST'
-    RETREAT = 'RETREAT'
-    LAND = 'LAND'
-    FAILSAFE_LAND = 'FAILSAFE_LAND'
 
 
 NEAR_WALL = (Mode.APPROACH, Mode.CONTACT, Mode.HOLD, Mode.TARGET_LOST)

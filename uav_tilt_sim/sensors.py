@@ -60,6 +60,7 @@ class SensorModel:
         std = self.noise.depth_m
         if std <= 0.0:
             return depth_m
-        noisy = depth_m + (std * depth_m ** 2 * self.rngs['depth'].standard_normal(
-            depth_m.shape)).astype(np.float32)
+        with np.errstate(invalid='ignore'):     # inf (nothing seen) stays inf below
+            noisy = depth_m + (std * depth_m ** 2 * self.rngs['depth'].standard_normal(
+                depth_m.shape)).astype(np.float32)
         return np.where(np.isfinite(depth_m), noisy, depth_m)

@@ -52,7 +52,7 @@ def run_graph(mode, sim_s):
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseWithCovarianceStamped
 
-    from uav_tilt_common import names, ros_qos
+    from uav_tilt_common import names, ros_msgs, ros_qos
 
     args = [LAUNCH, '--mission', 'inspect'] + (['--realtime'] if mode == 'realtime' else [])
     launch = subprocess.Popen(args, cwd=REPO, stdout=subprocess.DEVNULL,
@@ -63,8 +63,8 @@ def run_graph(mode, sim_s):
     for topic, values in latest.items():
         node.create_subscription(
             DiagnosticArray, topic,
-            lambda msg, values=values: values.update(
-                {kv.key: kv.value for kv in msg.status[0].values}), ros_qos.STATUS)
+            lambda msg, values=values: values.update(ros_msgs.diagnostics_values(msg)),
+            ros_qos.STATUS)
     plant_status, controller, vision = (latest[t] for t in (
         names.PLANT_STATUS, names.CONTROLLER_STATUS, names.VISION_STATUS))
     # vision publishes one target/pose per processed frame

@@ -18,6 +18,7 @@ from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_common import names, ros_msgs
+from uav_tilt_common.modes import WAITING_FOR_SENSORS
 
 CONTROLLER_STATUS_HZ = 10.0     # controller_node's default status_rate_hz
 STATUS_HZ = 2.0                 # plant_node's and vision_node's
@@ -142,7 +143,7 @@ class FlightBag:
         status = flight.status
         wall_ns, tick = self._window
         self._window = (now, flight.plant.tick)
-        values = dict(status) or dict(mode='WAITING_FOR_SENSORS')
+        values = dict(status) or dict(mode=WAITING_FOR_SENSORS)
         values.update(ticks=flight.plant.tick, saturated_ticks=self._saturated_ticks,
                       target_source=self.config.target_source, rejected_inputs=0,
                       contact_force=self.config.contact_force)

@@ -14,6 +14,7 @@ import numpy as np
 import yaml
 
 from uav_tilt_common.config import ConfigError, from_dict, to_flat
+from uav_tilt_common.modes import Mode
 from uav_tilt_control.controller_core import ControllerConfig
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
@@ -78,7 +79,7 @@ def failure_of(result):
     if not reason:
         if result.get('contact_lost'):
             reason = 'contact_lost'
-            where = {'mode': 'HOLD', 'phase': ''}
+            where = {'mode': Mode.HOLD.value, 'phase': ''}
         else:
             last = result['mode_history'][-1][1] if result.get('mode_history') else 'none'
             reason, where = 'not_completed', {'mode': last, 'phase': ''}

@@ -23,6 +23,7 @@ from uav_tilt_common import names, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_common.targets import is_no_target
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.frames import camera_pose_in_base
 from uav_tilt_sim.scenario import load_scenario
@@ -208,10 +209,10 @@ class FoxgloveBridge(Node):
     def on_controller(self, msg):
         """Mission mode, contact and outcome from controller/status."""
         if msg.status:
-            values = {kv.key: kv.value for kv in msg.status[0].values}
+            values = ros_msgs.diagnostics_values(msg)
             self.ch_mode.log(dict(mode=values.get('mode', ''),
-                                  in_contact=values.get('in_contact') == 'True',
-                                  success=values.get('success') == 'True'))
+                                  in_contact=values.get('in_contact') is True,
+                                  success=values.get('success') is True))
 
     def on_debug_image(self, msg):
         self.debug_image_wall = time.monotonic()
@@ -239,7 +240,7 @@ class FoxgloveBridge(Node):
 
     def on_seen_target(self, msg):
         """Vision's target in the camera frame; covariance[0] = -1 means none this frame."""
-        if msg.pose.covariance[0] == -1.0:
+        if is_no_target(msg.pose.covariance):
             self.ch_scene.log(fm.SceneUpdate(deletions=[fm.SceneEntityDeletion(
                 timestamp=_timestamp(msg.header.stamp), id='target_seen')]))
             return

@@ -62,7 +62,8 @@ from gymnasium import spaces
 from uav_tilt_common.config import ConfigError, from_dict, nested, param, to_flat
 from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_control.controller_core import TARGET_SOURCES, ControllerConfig
-from uav_tilt_control.mission import NEAR_WALL, Mode
+from uav_tilt_common.modes import Mode
+from uav_tilt_control.mission import NEAR_WALL
 from uav_tilt_sim.plant import PlantCoreConfig
 
 ENV_ID = 'uav_tilt/ContactInspection-v0'

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
-from uav_tilt_control.mission import Mode
+from uav_tilt_common.modes import Mode
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_tools.mission_metrics import mission_summary, push_along_normal
 

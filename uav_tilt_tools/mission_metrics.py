@@ -23,8 +23,8 @@ import math
 
 import numpy as np
 
-HOLD = 'HOLD'
-NOT_FLYING = ('IDLE', 'WAITING_FOR_SENSORS')
+from uav_tilt_common.modes import NOT_FLYING, Mode
+
 MISSION_KEYS = ('success', 'poi_error_m', 'poi_error_max_m', 'force_setpoint_n',
                 'force_mean_n', 'force_rms_error_n', 'max_force_n', 'contact_lost',
                 'hold_time_s', 'mission_time_s')
@@ -79,7 +79,7 @@ def mission_time_s(modes):
     if not flying:
         return None
     start = modes[flying[0]][0]
-    back = [t for t, m in modes[flying[0]:] if m == 'IDLE']
+    back = [t for t, m in modes[flying[0]:] if m == Mode.IDLE]
     return (back[0] if back else modes[-1][0]) - start
 
 
@@ -91,7 +91,7 @@ def mission_summary(modes, status, t_push, push_n, t_tip, tips_map, poi_map, nor
     ``tips_map``: true tool tip positions (N, 3); ``poi_map``: the true POI or None, and
     ``normal_map`` the surface normal there.
     """
-    hold = runs_of_mode(modes, HOLD)
+    hold = runs_of_mode(modes, Mode.HOLD)
     push_n = np.asarray(push_n, dtype=float)
     held = push_n[inside(t_push, hold)]
     tips_map = np.asarray(tips_map, dtype=float).reshape(-1, 3)

@@ -7,10 +7,8 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import ExternalShutdownException
 
-from uav_tilt_common import names, parent_watch, ros_qos
-
-# Modes in which no mission is under way.
-GROUNDED = ('IDLE', 'WAITING_FOR_SENSORS')
+from uav_tilt_common import names, parent_watch, ros_msgs, ros_qos
+from uav_tilt_common.modes import NOT_FLYING, Mode
 
 
 class MissionWatch:
@@ -22,12 +20,12 @@ class MissionWatch:
         self.mode = None
 
     def update(self, values):
-        """Feed one status (key -> string value)."""
+        """Feed one status (key -> decoded value, :func:`ros_msgs.diagnostics_values`)."""
         self.mode = values.get('mode', self.mode)
-        if self.mode not in GROUNDED:
+        if self.mode not in NOT_FLYING:
             self.started = True
-        elif self.started and self.mode == 'IDLE' and self.result is None:
-            self.result = values.get('success') == 'True'
+        elif self.started and self.mode == Mode.IDLE and self.result is None:
+            self.result = values.get('success') is True
 
 
 def main(args=None):
@@ -38,8 +36,7 @@ def main(args=None):
     watch = MissionWatch()
 
     def on_status(msg):
-        if msg.status:
-            watch.update({kv.key: kv.value for kv in msg.status[0].values})
+        watch.update(ros_msgs.diagnostics_values(msg))
 
     node.create_subscription(DiagnosticArray, names.CONTROLLER_STATUS, on_status,
                              ros_qos.STATUS)

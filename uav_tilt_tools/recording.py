@@ -19,6 +19,7 @@ from mcap_ros2.decoder import DecoderFactory
 from uav_tilt_common import names
 from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_common.ros_msgs import diagnostics_values, from_stamp, stamp_ns
+from uav_tilt_common.targets import is_no_target
 from uav_tilt_tools.mission_metrics import push_along_normal
 
 # What the report reads; the camera images and the noisy sensors stay on disk.
@@ -156,6 +157,6 @@ def frame_latencies_ms(rec):
 
 def detections(rec):
     """(t_s, seen) per target/pose: covariance[0] = -1 means no target in that frame."""
-    pairs = [(stamp_s(m), m.pose.covariance[0] != -1.0)
+    pairs = [(stamp_s(m), not is_no_target(m.pose.covariance))
              for _, m in rec.get(names.TARGET_POSE, ())]
     return np.array(pairs, dtype=float).reshape(-1, 2).T
