@@ -19,6 +19,8 @@ setup(
                                                 + glob('models/*.json'))),
     ],
     install_requires=['setuptools'],
+    # optional: `uav-tilt campaign --backend ray`, and the Gymnasium environment
+    extras_require={'ray': ['ray>=2.9'], 'gym': ['gymnasium>=1.0']},
     zip_safe=True,
     maintainer='uav_tilt maintainers',
     description='Tilting-rotor H quadrotor for aerial contact inspection (ROS 2, PyBullet).',

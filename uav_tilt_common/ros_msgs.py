@@ -4,7 +4,7 @@ import math
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, Imu, JointState, PointCloud2, PointField
 
@@ -113,6 +113,16 @@ def actuator_cdr(thrusts_n, tilts_rad, stamp_ns):
 def clock_cdr(t_s):
     """Serialized rosgraph_msgs/Clock at ``t_s`` (rounded as :func:`to_stamp`)."""
     return cdr.encode_clock(int(round(t_s * 1e9)))
+
+
+def pose_stamped_msg(p, q, stamp, frame_id=names.FRAME_MAP):
+    """geometry_msgs/PoseStamped of a position and an (x, y, z, w) quaternion."""
+    msg = PoseStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    _set_xyz(msg.pose.position, p)
+    _set_quat(msg.pose.orientation, q)
+    return msg
 
 
 def imu_msg(gyro, accel, q, stamp):

@@ -89,6 +89,9 @@ class ControllerCore:
         self._autostarted = False
         self._was_idle = True
         self.f_normal_n = 0.0
+        # setpoint_hook(setpoint) -> setpoint: an outer loop's correction of the mission's
+        # setpoint before the impedance law (a learnt policy, uav_tilt_tools.gym_env)
+        self.setpoint_hook = None
 
     # ---- inputs ----
 
@@ -179,6 +182,8 @@ class ControllerCore:
         if stale:
             state, setpoint = self._blind(t_s, setpoint, gyro, dt_s)
         else:
+            if self.setpoint_hook is not None:
+                setpoint = self.setpoint_hook(setpoint)
             state = VehicleState(t_s, self._odom.p_map, self._odom.q_map_base,
                                  self._odom.v_map, gyro)
         command, diagnostics = self.flight.step(state, setpoint, self._f_contact_map, dt_s,

@@ -1,4 +1,5 @@
-"""`uav-tilt bench sim|control|vision|graph`: one JSON object on stdout (DESIGN section 7)."""
+"""`uav-tilt bench sim|control|vision|graph|campaign|campaign_vision|gym`: one JSON object on
+stdout (DESIGN section 7)."""
 import json
 import os
 
@@ -23,8 +24,24 @@ def _graph(seconds):
     return bench_graph(seconds)
 
 
+def _campaign(seconds, target_source='ground_truth', runs_per_cpu=2):
+    from uav_tilt_tools.bench_scale import bench_campaign
+    return bench_campaign(target_source, (os.cpu_count() or 1) * runs_per_cpu, seconds)
+
+
+def _campaign_vision(seconds):
+    # a vision run costs minutes of CPU: one per core
+    return _campaign(seconds, 'vision', runs_per_cpu=1)
+
+
+def _gym(seconds):
+    from uav_tilt_tools.bench_scale import bench_gym
+    return bench_gym(seconds)
+
+
 # Imported on demand: the sim bench need not load torch or the controller.
-BENCHES = {'sim': _sim, 'control': _control, 'vision': _vision, 'graph': _graph}
+BENCHES = {'sim': _sim, 'control': _control, 'vision': _vision, 'graph': _graph,
+           'campaign': _campaign, 'campaign_vision': _campaign_vision, 'gym': _gym}
 
 
 def register(sub):
@@ -33,7 +50,7 @@ def register(sub):
     parser.add_argument('what', choices=sorted(BENCHES))
     parser.add_argument('--seconds', type=float, default=None,
                         help='length of each measurement (default: 30 s control, 20 s of '
-                             'simulated time graph, else 10 s)')
+                             'simulated time graph, the whole mission campaign*, else 10 s)')
     parser.set_defaults(func=run)
 
 
@@ -42,7 +59,8 @@ def run(args):
     # Benches start node processes: keep them local and away from a running system.
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
-    defaults = {'sim': 10.0, 'control': 30.0, 'vision': 10.0, 'graph': 20.0}
+    defaults = {'sim': 10.0, 'control': 30.0, 'vision': 10.0, 'graph': 20.0,
+                'campaign': None, 'campaign_vision': None, 'gym': 10.0}
     seconds = args.seconds if args.seconds is not None else defaults[args.what]
     print(json.dumps(BENCHES[args.what](seconds)))
     return 0

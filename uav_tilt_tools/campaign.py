@@ -1,23 +1,33 @@
 """`uav-tilt campaign --n N --seed S`: the inspection mission over a randomised world.
 
 Each run is ``uav-tilt fly`` (uav_tilt_tools.fly, the same cores as the nodes) on one draw
-of :func:`random_draw`, spread over the CPU cores; the JSON (DESIGN section 7) holds n,
-successes, success_rate, its 95% Wilson interval, the failures by reason and one entry per
-run. Targets come from ground truth by default; ``--target-source vision`` renders the
-camera and runs the deployed detector pipeline in each run.
+of :func:`random_draw`, spread over the CPU cores of this machine (``--backend local``, a
+process pool) or over a Ray cluster (``--backend ray``, :mod:`uav_tilt_tools.campaign_ray`);
+the JSON (DESIGN section 7) holds n, successes, success_rate, its 95% Wilson interval, the
+failures by reason and one entry per run, the same from either backend. Targets come from
+ground truth by default; ``--target-source vision`` renders the camera and runs the
+deployed detector pipeline in each run. ``--out DIR`` keeps each run as it finishes
+(:mod:`uav_tilt_tools.campaign_store`), so that ``--resume`` continues an interrupted
+campaign.
 """
 import collections
 import json
 import math
 import multiprocessing
 import os
+import signal
+import sys
+import tempfile
 
 import numpy as np
 
-from uav_tilt_common.config import from_dict
+from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_tools.fly import jsonable
 from uav_tilt_common.targets import OBJECT_CLASSES
 from uav_tilt_sim.scenario import Scenario, check_scenario
+from uav_tilt_tools.campaign_ray import CampaignError, ray_runs
+
+BACKENDS = ('local', 'ray')
 
 # The world a campaign draws from.
 START_YAW_DEG = 180.0         # vehicle heading at takeoff, from the direction to the wall
@@ -103,20 +113,27 @@ def _wrap_deg(angle):
 
 
 def run_one(job):
-    """One campaign run (top level so that worker processes can pickle it)."""
-    index, seed, target_source, duration_s = job
+    """One campaign run (top level so that worker processes can pickle it): (the run's
+    dict, the bytes of its MCAP recording when ``job['record']``, else None)."""
     # Imported here so that each worker process builds its own physics server.
     from uav_tilt_tools.fly import fly, site_overrides
-    scenario, hint = random_draw(seed)
+    scenario, hint = random_draw(job['seed'])
     overrides = site_overrides(scenario, hint) if hint is not None else {}
-    result = fly(scenario, target_source, overrides, duration_s)
-    result.update(index=index, seed=seed, hint_uv_m=hint,
+    with tempfile.TemporaryDirectory(prefix='uav_tilt_run_') as tmp:
+        record = os.path.join(tmp, 'recording.mcap') if job['record'] else None
+        result = fly(scenario, job['target_source'], overrides, job['duration_s'],
+                     threads=job['threads'], record=record)
+        bag = None
+        if record is not None:
+            with open(record, 'rb') as stream:
+                bag = stream.read()
+    result.update(index=job['index'], seed=job['seed'], hint_uv_m=hint,
                   wall_distance_m=float(np.hypot(*scenario.wall.position_m)),
                   wall_yaw_deg=scenario.wall.yaw_deg,
                   wall_inclination_deg=scenario.wall.inclination_deg,
                   wall_stiffness_n_per_m=scenario.wall.stiffness_n_per_m,
                   mass_scale=scenario.mismatch.mass_scale)
-    return result
+    return result, bag
 
 
 def wilson_interval(successes, n, z=1.96):
@@ -133,20 +150,89 @@ def wilson_interval(successes, n, z=1.96):
     return low, high
 
 
-def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=DURATION_S,
-             progress=True):
-    """Run ``n`` randomised missions; returns the DESIGN section 7 JSON dict."""
+def jobs_of(n, seed, target_source='ground_truth', duration_s=DURATION_S, threads=0,
+            record=False):
+    """The ``n`` runs of campaign ``seed``: one world seed each, by run index."""
     seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=n)
-    jobs = [(i, int(s), target_source, duration_s) for i, s in enumerate(seeds)]
-    workers = workers or min(n, os.cpu_count() or 1)
-    runs = []
-    with multiprocessing.get_context('spawn').Pool(workers) as pool:
-        results = pool.imap_unordered(run_one, jobs)
-        if progress:
-            from tqdm import tqdm
-            results = tqdm(results, total=n, desc='campaign', unit='run')
-        runs.extend(results)
-    runs.sort(key=lambda r: r['index'])
+    return [dict(index=i, seed=int(s), target_source=target_source, duration_s=duration_s,
+                 threads=threads, record=record) for i, s in enumerate(seeds)]
+
+
+def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=DURATION_S,
+             progress=True, backend='local', address=None, out=None, resume=False,
+             record=False):
+    """Run ``n`` randomised missions; returns the DESIGN section 7 JSON dict.
+
+    ``backend``: 'local' (a process pool of ``workers``, default one per core) or 'ray'
+    (one Ray task per run on a local Ray of ``workers`` CPUs, or on the cluster at
+    ``address``). ``out``: a folder that gets one JSON line per finished run
+    (:mod:`uav_tilt_tools.campaign_store`; with ``record``, an MCAP per run);
+    ``resume`` skips the runs it already holds. Runs are counted once each, by index.
+    Ctrl-C raises :class:`Interrupted` after keeping what finished.
+    """
+    if backend not in BACKENDS:
+        raise ConfigError(f'backend {backend!r}: expected one of {BACKENDS}')
+    if record and out is None:
+        raise ConfigError('recording needs an output folder (--out DIR)')
+    if address is not None and backend != 'ray':
+        raise ConfigError('an address (--address) needs the ray backend (--backend ray)')
+    cpus = os.cpu_count() or 1
+    if backend == 'ray':
+        runner = ray_runs
+        threads = 1                     # each task gets one CPU
+    else:
+        runner = _local_runs
+        workers = workers or min(n, cpus)
+        threads = max(1, cpus // max(workers, 1))
+    jobs = jobs_of(n, seed, target_source, duration_s, threads, record)
+    store = None
+    if out is not None:
+        from uav_tilt_tools.campaign_store import RunStore
+        store = RunStore(out, dict(n=n, seed=seed, target_source=target_source,
+                                   duration_s=duration_s), resume)
+    done = store.runs_of(jobs) if store is not None else {}
+    todo = [job for job in jobs if job['index'] not in done]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=n, initial=len(done), desc='campaign', unit='run')
+    results = runner(run_one, todo, workers, address)
+    try:
+        for run, bag in results:
+            if run['index'] in done:        # a run is counted once, whatever comes back
+                continue
+            done[run['index']] = run
+            if store is not None:
+                store.add(run, bag)
+            if bar is not None:
+                bar.update()
+    except KeyboardInterrupt:
+        raise Interrupted(len(done), n, store.runs_path if store is not None else None) \
+            from None
+    finally:
+        results.close()
+        if bar is not None:
+            bar.close()
+    result = summarize(n, seed, target_source, [done[i] for i in sorted(done)])
+    if store is not None:
+        store.finish(result)
+    return result
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during a campaign: ``kept`` of ``n`` runs finished (in ``runs_path``)."""
+
+    def __init__(self, kept, n, runs_path):
+        super().__init__(kept, n, runs_path)
+        self.kept, self.n, self.runs_path = kept, n, runs_path
+
+    def __str__(self):
+        where = f' in {self.runs_path} (--resume continues)' if self.runs_path else ''
+        return f'interrupted: {self.kept} of {self.n} runs finished{where}'
+
+
+def summarize(n, seed, target_source, runs):
+    """The campaign JSON of its ``runs`` (by index)."""
     successes = sum(r['success'] for r in runs)
     low, high = wilson_interval(successes, n)
     failures = collections.Counter(f"{r['failure']['reason']} in {r['failure']['mode']}"
@@ -156,12 +242,37 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=DUR
                 failures=dict(failures), runs=runs)
 
 
+def _local_runs(run_one, jobs, workers, address=None):
+    """``run_one(job)`` of each job as it finishes, from a spawn process pool."""
+    if not jobs:
+        return
+    with multiprocessing.get_context('spawn').Pool(workers, initializer=_ignore_sigint) as pool:
+        yield from pool.imap_unordered(run_one, jobs)
+
+
+def _ignore_sigint():
+    # Ctrl-C reaches the whole process group: the parent keeps what finished and
+    # terminates the pool, instead of every worker printing a traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def register(sub):
     """Add the `campaign` sub-command."""
     parser = sub.add_parser('campaign', help='the mission over randomised scenarios (JSON)')
     parser.add_argument('--n', type=int, default=20)
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--workers', type=int, default=None)
+    parser.add_argument('--workers', type=int, default=None,
+                        help='runs at once (local) or CPUs of the local Ray; default: cores')
+    parser.add_argument('--backend', choices=BACKENDS, default='local',
+                        help='ray: one Ray task per run (pip install uav_tilt[ray])')
+    parser.add_argument('--address', default=None,
+                        help="with --backend ray: join this cluster ('auto', HOST:6379)")
+    parser.add_argument('--out', default=None, metavar='DIR',
+                        help='write one JSON line per finished run to DIR/runs.jsonl')
+    parser.add_argument('--resume', action='store_true',
+                        help='skip the runs DIR/runs.jsonl already holds')
+    parser.add_argument('--record', action='store_true',
+                        help='one MCAP per run: DIR/run_NNNN/recording.mcap')
     parser.add_argument('--duration', type=float, default=DURATION_S,
                         help='simulated seconds allowed per mission')
     parser.add_argument('--target-source', choices=('ground_truth', 'vision'),
@@ -171,6 +282,18 @@ def register(sub):
 
 
 def _run(args):
-    result = campaign(args.n, args.seed, args.workers, args.target_source, args.duration)
+    try:
+        result = campaign(args.n, args.seed, args.workers, args.target_source, args.duration,
+                          backend=args.backend, address=args.address, out=args.out,
+                          resume=args.resume, record=args.record)
+    except ConfigError as err:
+        print(f'uav-tilt campaign: {err}', file=sys.stderr)
+        return 2
+    except CampaignError as err:
+        print(f'uav-tilt campaign: {err}', file=sys.stderr)
+        return 1
+    except Interrupted as err:
+        print(f'uav-tilt campaign: {err}', file=sys.stderr)
+        return 130
     print(json.dumps(result, default=jsonable))
     return 0 if result['n'] else 1

@@ -35,8 +35,13 @@ def site_overrides(scenario, hint_uv_m=None):
 
 
 def fly(scenario, target_source='vision', overrides=None, duration_s=DURATION_S,
-        model_path=None):
-    """Fly the inspection mission of ``scenario``; returns the summary dict."""
+        model_path=None, threads=0, record=None):
+    """Fly the inspection mission of ``scenario``; returns the summary dict.
+
+    ``threads``: the detector's (and OpenCV's) thread pool, 0 = the libraries' defaults;
+    ``record``: an MCAP path to write the flight to, as the recorder would
+    (:mod:`uav_tilt_tools.flight_bag`).
+    """
     from uav_tilt_tools.inprocess import camera_vision, run_mission
     values = {'target_source': target_source, **(overrides or {})}
     config = from_dict(ControllerConfig, values)
@@ -44,10 +49,19 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=DURATION_S,
     if target_source == 'vision':
         from uav_tilt_common.resources import locate
         from uav_tilt_vision.vision_node import VisionNodeConfig
-        vision = camera_vision(plant_config, model_path or locate(VisionNodeConfig().model_path))
+        vision = camera_vision(plant_config, model_path or locate(VisionNodeConfig().model_path),
+                               threads=threads)
+    bag = None
+    if record is not None:
+        from uav_tilt_tools.flight_bag import FlightBag
+        bag = FlightBag(record, config, plant_config.camera, vision)
     start = time.perf_counter()
-    result = run_mission(scenario, config, duration_s=duration_s, plant_config=plant_config,
-                         vision=vision)
+    try:
+        result = run_mission(scenario, config, duration_s=duration_s,
+                             plant_config=plant_config, vision=vision, recorder=bag)
+    finally:
+        if bag is not None:
+            bag.close()
     wall_s = time.perf_counter() - start
     result['rtf'] = result['sim_time_s'] / wall_s
     result['controller_rate_hz'] = result['ticks'] / wall_s

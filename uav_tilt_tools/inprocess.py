@@ -22,15 +22,19 @@ class Flight:
 
     ``vision(plant, t_s)`` (optional) returns ``(stamp_s, candidates)`` of a frame, as
     ``target/candidates`` carries them, or None when there is no frame this tick.
+    ``recorder(flight, sensors, command)`` (optional) sees every tick after the controller
+    (:class:`uav_tilt_tools.flight_bag.FlightBag` writes it as the node graph's topics).
     """
 
     def __init__(self, scenario, controller_config=None, vehicle=None, plant_config=None,
-                 vision=None):
+                 vision=None, recorder=None):
         self.vehicle = vehicle or VehicleParams()
         plant_config = plant_config or PlantCoreConfig(vehicle=self.vehicle)
         self.plant = Plant(plant_config, scenario)
         self.core = ControllerCore(self.vehicle, controller_config or ControllerConfig())
         self.vision = vision
+        self.recorder = recorder
+        self.sensors = None         # the plant's readings of the last tick
         self.odometry_enabled = True
         self.status = {}
         self.log = []               # one dict per tick, see :meth:`step`
@@ -48,7 +52,7 @@ class Flight:
     def step(self):
         """One 300 Hz tick: sensors -> controller -> plant."""
         plant, core = self.plant, self.core
-        sensors = plant.read_sensors()
+        sensors = self.sensors = plant.read_sensors()
         if self.odometry_enabled:
             core.on_odometry(sensors.odom)
         core.on_wrench(sensors.ee_force_n, sensors.ee_torque_nm)
@@ -64,6 +68,8 @@ class Flight:
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
                              push_n=self._true_push_n(sensors.in_contact),
                              ft_force_ee_n=sensors.ee_force_n, command=command))
+        if self.recorder is not None:
+            self.recorder(self, sensors, command)
         plant.step(command)
 
     def run(self, duration_s, until=None):
@@ -125,7 +131,6 @@ def mission_result(flight):
                   confirmed_target_map=approached[0] if approached else None,
                   sim_time_s=float(flight.t_s), ticks=len(log))
     return result
-    return result
 
 
 def _first_touch_peak(log, push, window_s=0.25):
@@ -140,13 +145,13 @@ def _first_touch_peak(log, push, window_s=0.25):
 
 
 def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None,
-                plant_config=None, vision=None):
+                plant_config=None, vision=None, recorder=None):
     """Fly the inspection mission (``inspect`` at t = 0) until landed or ``duration_s``.
 
     Returns :func:`mission_result`'s dict.
     """
     config = controller_config or ControllerConfig()
-    flight = Flight(scenario, config, vehicle, plant_config, vision)
+    flight = Flight(scenario, config, vehicle, plant_config, vision, recorder)
     try:
         flight.step()
         ok, message = flight.core.inspect()
@@ -161,31 +166,42 @@ def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None
 class CameraVision:
     """Vision in the loop without ROS: renders the eye-in-hand camera at its rate and runs
     the VisionPipeline; each frame gives its target candidates stamped with the frame time
-    (as vision_node stamps target/candidates), an empty list included."""
+    (as vision_node stamps target/candidates), an empty list included. ``last_frame`` is
+    (stamp_s, FrameResult, rendered_ns, processed_ns) of the newest frame (wall clock ns
+    when the image was ready and when the pipeline was done with it), or None."""
 
     def __init__(self, pipeline, camera_rate_hz, control_rate_hz):
         self.pipeline = pipeline
         self.every = max(1, int(round(control_rate_hz / camera_rate_hz)))
         self.frames = 0
         self.found = 0
+        self.last_frame = None
 
     def __call__(self, plant, t_s):
         """(stamp_s, candidates) of this tick's frame, or None when none is rendered."""
         if plant.tick % self.every:
             return None
         rgb, depth, _ = plant.render()
+        rendered_ns = time.time_ns()
         result = self.pipeline.process(rgb, depth, t_s)
+        self.last_frame = (t_s, result, rendered_ns, time.time_ns())
         self.frames += 1
         self.found += int(result.found)
         return t_s, result.candidates
 
 
-def camera_vision(plant_config, model_path, backend='auto', vision_config=None):
-    """A :class:`CameraVision` with the detector at ``model_path`` and the plant's camera."""
+def camera_vision(plant_config, model_path, backend='auto', vision_config=None, threads=0):
+    """A :class:`CameraVision` with the detector at ``model_path`` and the plant's camera;
+    ``threads`` (0: the libraries' defaults) sizes the detector's thread pool and
+    OpenCV's (process-wide), e.g. to the one CPU a campaign run gets."""
     from uav_tilt_vision.backends import load_detector
     from uav_tilt_vision.pipeline import VisionPipeline
     from uav_tilt_vision.target_pose import CameraIntrinsics
+    if threads:
+        import cv2
+        cv2.setNumThreads(threads)
     cam = plant_config.camera
     intrinsics = CameraIntrinsics(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
-    pipeline = VisionPipeline(load_detector(model_path, backend), intrinsics, vision_config)
+    pipeline = VisionPipeline(load_detector(model_path, backend, threads), intrinsics,
+                              vision_config)
     return CameraVision(pipeline, cam.rate_hz, plant_config.control_hz)

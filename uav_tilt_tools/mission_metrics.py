@@ -62,6 +62,16 @@ def push_along_normal(R_map_base, force_ee, R_map_target):
                  @ np.asarray(R_map_target)[:, 2])
 
 
+def poi_errors_m(tips_map, poi_map, normal_map=None):
+    """Distance [m] of each true tool tip (N, 3) from the POI, along the surface when
+    ``normal_map`` is given (the tip's depth into a wall that gives way is no POI error)."""
+    offsets = np.asarray(tips_map, dtype=float).reshape(-1, 3) - poi_map
+    if normal_map is not None:
+        n = np.asarray(normal_map, dtype=float)
+        offsets = offsets - np.outer(offsets @ n, n)
+    return np.linalg.norm(offsets, axis=1)
+
+
 def mission_time_s(modes):
     """Sim time from leaving IDLE to being back in IDLE (or the last sample); None if the
     vehicle never flew."""
@@ -87,11 +97,7 @@ def mission_summary(modes, status, t_push, push_n, t_tip, tips_map, poi_map, nor
     tips_map = np.asarray(tips_map, dtype=float).reshape(-1, 3)
     errors = np.zeros(0)
     if poi_map is not None:
-        offsets = tips_map[inside(t_tip, hold)] - poi_map
-        if normal_map is not None:
-            n = np.asarray(normal_map, dtype=float)
-            offsets = offsets - np.outer(offsets @ n, n)
-        errors = np.linalg.norm(offsets, axis=1)
+        errors = poi_errors_m(tips_map[inside(t_tip, hold)], poi_map, normal_map)
     setpoint = json_number(status.get('contact_force_n'))
     success, lost = status.get('success'), json_number(status.get('contact_lost'))
     summary = dict(

@@ -82,12 +82,22 @@ def onnx_source(model_path: str | os.PathLike[str]) -> Path:
     return Path(model_path).parent / json.loads(props['detector'])['source']
 
 
-def load_detector(model_path: str | os.PathLike[str], backend: str = 'auto'
-                  ) -> 'TorchDetector | OnnxDetector':
+def load_detector(model_path: str | os.PathLike[str], backend: str = 'auto',
+                  threads: int = 0) -> 'TorchDetector | OnnxDetector':
     """A detector with ``predict(rgb) -> (N, 6)``, ``backend`` (the one used) and ``note``.
 
-    ``backend``: 'torch', 'onnxruntime', or 'auto' (by the file suffix).
+    ``backend``: 'torch', 'onnxruntime', or 'auto' (by the file suffix). ``threads``: the
+    size of ONNX Runtime's intra-op pool, or torch's (process-wide); 0 keeps the default.
     """
+    detector = _load(model_path, backend, threads)
+    if threads and detector.backend == 'torch':
+        import torch
+        torch.set_num_threads(threads)
+    return detector
+
+
+def _load(model_path: str | os.PathLike[str], backend: str,
+          threads: int) -> 'TorchDetector | OnnxDetector':
     path = Path(model_path)
     is_onnx = path.suffix == '.onnx'
     if backend == 'auto':
@@ -96,7 +106,7 @@ def load_detector(model_path: str | os.PathLike[str], backend: str = 'auto'
         raise ValueError(f'unknown backend {backend!r}; expected one of {BACKENDS}')
     if backend == 'onnxruntime' and is_onnx:
         try:
-            return OnnxDetector(path)
+            return OnnxDetector(path, threads)
         except ImportError as exc:
             reason = f'onnxruntime unavailable ({exc})'
     elif backend == 'onnxruntime':

@@ -1,0 +1,75 @@
+"""The Ray backend of the campaign: the same runs as the local backend, each counted once
+even when a worker dies under a run (Ray runs the task again)."""
+import os
+import signal
+import threading
+import time
+
+import pytest
+
+from uav_tilt_tools import campaign as cp
+
+N, SEED = 6, 20261201
+DURATION_S = 8.0             # takeoff and the climb to the search: short runs
+WALL_CLOCK_KEYS = ('rtf', 'controller_rate_hz', 'vision_fps')
+
+
+def comparable(run):
+    """A run's dict without what depends on the wall clock."""
+    return {k: v for k, v in run.items() if k not in WALL_CLOCK_KEYS}
+
+
+@pytest.fixture(scope='module')
+def local():
+    return cp.campaign(N, SEED, workers=2, duration_s=DURATION_S, progress=False)
+
+
+def test_ray_campaign_gives_the_local_runs(local):
+    ray = cp.campaign(N, SEED, workers=2, duration_s=DURATION_S, progress=False,
+                      backend='ray')
+    assert [r['index'] for r in ray['runs']] == list(range(N))
+    assert [comparable(r) for r in ray['runs']] == [comparable(r) for r in local['runs']]
+    assert {k: v for k, v in ray.items() if k != 'runs'} == \
+        {k: v for k, v in local.items() if k != 'runs'}
+
+
+def _ray_task_pids(name_prefix):
+    """Pids of the processes whose title starts with ``name_prefix`` (Ray titles a worker
+    ``ray::<task name>`` while it runs that task)."""
+    pids = []
+    for entry in os.listdir('/proc'):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f'/proc/{entry}/cmdline', 'rb') as stream:
+                title = stream.read().replace(b'\0', b' ').decode(errors='replace')
+        except OSError:
+            continue
+        if title.startswith(name_prefix):
+            pids.append(int(entry))
+    return pids
+
+
+def test_a_worker_killed_mid_run_still_counts_every_run_once(local):
+    killed = []
+
+    def kill_one_worker():
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and not killed:
+            pids = _ray_task_pids('ray::campaign run')
+            if pids:
+                time.sleep(0.3)         # into the run: its physics is flying
+                if pids[0] in _ray_task_pids('ray::campaign run'):
+                    os.kill(pids[0], signal.SIGKILL)
+                    killed.append(pids[0])
+            time.sleep(0.05)
+
+    killer = threading.Thread(target=kill_one_worker, daemon=True)
+    killer.start()
+    result = cp.campaign(N, SEED, workers=2, duration_s=DURATION_S, progress=False,
+                         backend='ray')
+    killer.join()
+    assert killed, 'no campaign task was seen running'
+    assert result['n'] == N and [r['index'] for r in result['runs']] == list(range(N))
+    # the run that lost its worker was flown again from its seed: the same result
+    assert [comparable(r) for r in result['runs']] == [comparable(r) for r in local['runs']]

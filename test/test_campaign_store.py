@@ -1,0 +1,83 @@
+"""`uav-tilt campaign --out DIR`: one JSON line per finished run, an interrupted campaign
+resumed with --resume finishes with every run once, --record keeps one MCAP per run."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from uav_tilt_common import names
+from uav_tilt_common.config import ConfigError
+from uav_tilt_tools import campaign as cp
+from uav_tilt_tools import recording
+from uav_tilt_tools.campaign_store import RUNS_FILE, RESULT_FILE, BAG_NAME, run_dir
+
+N, SEED, DURATION_S = 4, 7, 8.0
+
+
+def _cli(*args):
+    return [sys.executable, '-m', 'uav_tilt_tools.cli', 'campaign', '--n', str(N),
+            '--seed', str(SEED), '--duration', str(DURATION_S), '--workers', '2', *args]
+
+
+def _lines(out):
+    with open(os.path.join(out, RUNS_FILE), encoding='utf-8') as stream:
+        return [json.loads(line) for line in stream]
+
+
+def test_interrupted_campaign_resumes_with_every_run_once(tmp_path):
+    out = str(tmp_path / 'campaign')
+    # Ctrl-C as a terminal sends it: to the process group, once the first run is kept
+    proc = subprocess.Popen(_cli('--out', out), process_group=0, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    runs_path = os.path.join(out, RUNS_FILE)
+    deadline = time.monotonic() + 120.0
+    while time.monotonic() < deadline and proc.poll() is None:
+        if os.path.exists(runs_path) and os.path.getsize(runs_path):
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    kept = _lines(out)
+    assert proc.returncode == 130, stderr
+    assert 1 <= len(kept) < N and f'{len(kept)} of {N} runs' in stderr
+    assert not stdout and not os.path.exists(os.path.join(out, RESULT_FILE))
+    # a line cut short by a kill during its write is dropped on resume, not read
+    with open(runs_path, 'a', encoding='utf-8') as stream:
+        stream.write('{"index": 3, "se')
+    done = subprocess.run(_cli('--out', out, '--resume'), capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    lines = _lines(out)
+    assert sorted(r['index'] for r in lines) == list(range(N))
+    assert [r['index'] for r in result['runs']] == list(range(N)) and result['n'] == N
+    assert lines[:len(kept)] == kept             # what was kept is not flown again
+    with open(os.path.join(out, RESULT_FILE), encoding='utf-8') as stream:
+        assert json.load(stream) == result
+    # a second campaign into the same folder is refused, not mixed in
+    again = subprocess.run(_cli('--out', out), capture_output=True, text=True, timeout=120)
+    assert again.returncode == 2 and '--resume' in again.stderr
+
+
+def test_resume_refuses_another_campaign(tmp_path):
+    cp.campaign(1, SEED, duration_s=0.1, progress=False, out=tmp_path)
+    with pytest.raises(ConfigError):
+        cp.campaign(1, SEED + 1, duration_s=0.1, progress=False, out=tmp_path, resume=True)
+
+
+def test_record_keeps_one_mcap_per_run_that_the_report_reads(tmp_path):
+    result = cp.campaign(2, SEED, workers=2, duration_s=4.0, progress=False, out=tmp_path,
+                         record=True)
+    for run in result['runs']:
+        folder = run_dir(str(tmp_path), run['index'])
+        assert os.listdir(folder) == [BAG_NAME]
+        rec = recording.load_recording(folder, topics=recording.REPORT_TOPICS + (names.ODOM,))
+        # every controller tick's sensors, as the plant node publishes them
+        assert len(rec[names.ODOM]) == len(rec[names.CLOCK]) == run['ticks']
+        modes = recording.modes(recording.statuses(rec, names.CONTROLLER_STATUS))
+        assert modes[-1][1] == run['mode_history'][-1][1]
+        assert recording.target_pose(rec) is not None

@@ -1,0 +1,94 @@
+"""uav_tilt/ContactInspection-v0: a valid Gymnasium environment, reproducible from its
+seeds across processes, whose return with the mission's own controller as the policy is
+the one the mission's metrics of that touch imply."""
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from uav_tilt_common.modes import NOT_FLYING
+from uav_tilt_tools import gym_env
+from uav_tilt_tools.inprocess import mission_result
+
+MODULE_ID = f'uav_tilt_tools.gym_env:{gym_env.ENV_ID}'
+
+
+def test_check_env_passes_with_the_camera():
+    # the whole mission as the episode: check_env resets a dozen times
+    env = gym_env.ContactInspectionEnv(render_mode='rgb_array', camera=True, start='takeoff',
+                                       episode_s=1.0)
+    try:
+        check_env(env, skip_render_check=False)
+        obs, _ = env.reset(seed=1)
+        assert obs['image'].shape == env.observation_space['image'].shape
+        assert obs['image'].std() > 0            # a rendered view, not a blank
+        # an episode from the ground flies: the takeoff is no crash
+        for _ in range(30):
+            _, reward, terminated, truncated, info = env.step(env.action_space.sample())
+            assert not terminated and reward == 0.0, info
+        assert info['mode'] not in NOT_FLYING
+    finally:
+        env.close()
+
+
+def test_bad_options_stop_with_one_clear_error():
+    with pytest.raises(Exception, match='start'):
+        gym_env.ContactInspectionEnv(start='orbit')
+
+
+def test_two_vector_envs_reproduce_from_their_seeds():
+    rng = np.random.default_rng()
+    seeds = [int(s) for s in rng.integers(0, 2**31 - 1, size=2)]
+    actions = rng.uniform(-1.0, 1.0, size=(6, 2, 3)).astype(np.float32)
+    envs = gym.make_vec(MODULE_ID, num_envs=2, vectorization_mode='async',
+                        vector_kwargs={'context': 'spawn'})
+    try:
+        episodes = []
+        for _ in range(2):
+            obs, info = envs.reset(seed=seeds)
+            trace = [obs]
+            for action in actions:
+                obs, reward, terminated, truncated, _ = envs.step(action)
+                trace.append((obs, reward, terminated, truncated))
+            episodes.append((list(info['world_seed']), trace))
+    finally:
+        envs.close()
+    (worlds, first), (again, second) = episodes
+    assert worlds == again and worlds[0] != worlds[1], seeds
+    for a, b in zip(first, second):
+        obs_a, obs_b = (a, b) if isinstance(a, dict) else (a[0], b[0])
+        for key in obs_a:
+            np.testing.assert_array_equal(obs_a[key], obs_b[key], err_msg=key)
+        if not isinstance(a, dict):
+            for x, y in zip(a[1:], b[1:]):
+                np.testing.assert_array_equal(x, y)
+    # two worlds: two different flights
+    assert not np.array_equal(first[0]['tip_t'][0], first[0]['tip_t'][1])
+
+
+def test_the_missions_controller_earns_the_reward_its_touch_metrics_imply():
+    env = gym.make(gym_env.ENV_ID)
+    try:
+        _, info = env.reset(seed=int(np.random.default_rng().integers(0, 2**31 - 1)))
+        world = info['world_seed']
+        total, zero = 0.0, np.zeros(3, dtype=np.float32)
+        while True:
+            _, reward, terminated, truncated, info = env.step(zero)
+            total += reward
+            if terminated or truncated:
+                break
+        base = env.unwrapped
+        assert info['outcome'] == 'success', (world, info)
+        metrics = mission_result(base.flight)
+        cfg = base.cfg
+        dt_s = base.flight.plant.dt_tick
+        hold_ticks = round(metrics['hold_time_s'] / dt_s) + 1
+        assert hold_ticks * dt_s >= cfg.controller.mission.hold_time_s
+        # mean over HOLD of 1 - (force error / scale)^2 - POI error / scale, per step
+        implied = hold_ticks / base.ticks_per_step * (
+            1.0 - (metrics['force_rms_error_n'] / cfg.force_scale_n) ** 2
+            - metrics['poi_error_m'] / cfg.poi_scale_m)
+        assert total == pytest.approx(implied, rel=1e-6), world
+        assert implied > 0.5 * hold_ticks / base.ticks_per_step, metrics
+    finally:
+        env.close()

@@ -1,0 +1,98 @@
+"""The ``--out DIR`` of a campaign: what it is, and every run as it finishes.
+
+- ``DIR/campaign_args.json``: n, seed, target_source, duration_s (a resume must match);
+- ``DIR/runs.jsonl``: one JSON line per finished run (the run's dict of the campaign JSON),
+  appended and synced to disk as each run finishes, so an interrupted campaign keeps them;
+- ``DIR/run_NNNN/recording.mcap`` with ``--record`` (written before the run's line, so a
+  line means its recording is complete); ``uav-tilt report DIR/run_NNNN`` reads it;
+- ``DIR/campaign.json``: the campaign JSON once every run is in.
+"""
+import json
+import os
+
+from uav_tilt_common.config import ConfigError
+from uav_tilt_tools.fly import jsonable
+
+ARGS_FILE = 'campaign_args.json'
+RUNS_FILE = 'runs.jsonl'
+RESULT_FILE = 'campaign.json'
+BAG_NAME = 'recording.mcap'
+
+
+def run_dir(out_dir, index):
+    """The folder of run ``index``'s recording."""
+    return os.path.join(out_dir, f'run_{index:04d}')
+
+
+class RunStore:
+    """Runs of one campaign in ``out_dir``; ``resume`` continues the campaign found there."""
+
+    def __init__(self, out_dir, args, resume=False):
+        self.out_dir = str(out_dir)
+        self.runs_path = os.path.join(self.out_dir, RUNS_FILE)
+        args_path = os.path.join(self.out_dir, ARGS_FILE)
+        os.makedirs(self.out_dir, exist_ok=True)
+        if resume and os.path.exists(args_path):
+            with open(args_path, encoding='utf-8') as stream:
+                found = json.load(stream)
+            if found != args:
+                raise ConfigError(f'{self.out_dir} holds the campaign {found}, not {args}')
+        elif os.path.exists(self.runs_path) and os.path.getsize(self.runs_path) and not resume:
+            raise ConfigError(f'{self.runs_path} already holds runs: --resume continues that '
+                              f'campaign, or choose another --out')
+        with open(args_path, 'w', encoding='utf-8') as stream:
+            json.dump(args, stream)
+        self._lines = self._read() if resume else []
+        if not resume:
+            open(self.runs_path, 'w').close()
+
+    def _read(self):
+        """The runs of runs.jsonl; a line cut short by a kill is dropped from the file."""
+        if not os.path.exists(self.runs_path):
+            return []
+        runs, good_bytes = [], 0
+        with open(self.runs_path, 'rb') as stream:
+            for line in stream:
+                try:
+                    runs.append(json.loads(line))
+                except ValueError:
+                    break
+                if not line.endswith(b'\n'):
+                    runs.pop()
+                    break
+                good_bytes += len(line)
+        with open(self.runs_path, 'r+b') as stream:
+            stream.truncate(good_bytes)
+        return runs
+
+    def runs_of(self, jobs):
+        """{index: run} of the stored runs that belong to ``jobs`` (each once)."""
+        seeds = {job['index']: job['seed'] for job in jobs}
+        runs = {}
+        for run in self._lines:
+            index = run.get('index')
+            if seeds.get(index) != run.get('seed'):
+                raise ConfigError(f'{self.runs_path}: run {index} with seed {run.get("seed")} '
+                                  f'is not one of this campaign')
+            runs.setdefault(index, run)
+        return runs
+
+    def add(self, run, bag=None):
+        """Keep one finished run (and its recording's bytes)."""
+        if bag is not None:
+            folder = run_dir(self.out_dir, run['index'])
+            os.makedirs(folder, exist_ok=True)
+            path = os.path.join(folder, BAG_NAME)
+            with open(path + '.part', 'wb') as stream:
+                stream.write(bag)
+            os.replace(path + '.part', path)
+        line = json.dumps(run, default=jsonable) + '\n'
+        with open(self.runs_path, 'a', encoding='utf-8') as stream:
+            stream.write(line)
+            stream.flush()
+            os.fsync(stream.fileno())
+
+    def finish(self, result):
+        """Write the campaign JSON beside its runs."""
+        with open(os.path.join(self.out_dir, RESULT_FILE), 'w', encoding='utf-8') as stream:
+            json.dump(result, stream, default=jsonable)

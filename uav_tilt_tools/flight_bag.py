@@ -1,0 +1,176 @@
+"""An in-process flight written as the recorder would write the node graph's run (MCAP).
+
+:class:`FlightBag` is the ``recorder`` of :class:`uav_tilt_tools.inprocess.Flight`: each
+tick it serializes, with the rclpy message classes and the nodes' own conversions
+(:mod:`uav_tilt_common.ros_msgs`), what the plant, controller and vision nodes would have
+published on the same topics (namespace ``/uav``, ``/clock``) with the same types and
+stamps, into an :class:`uav_tilt_tools.mcap_bag.McapBag`; ``uav-tilt report`` reads it like
+a recording of the graph. Log times are the wall clock of the in-process run. Not written:
+the camera images (about 0.3 MB a frame), which no report reads, and the services.
+"""
+import collections
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.serialization import serialize_message
+from rosgraph_msgs.msg import Clock
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_common import names, ros_msgs
+from uav_tilt_common.modes import WAITING_FOR_SENSORS
+
+CONTROLLER_STATUS_HZ = 10.0     # controller_node's default status_rate_hz
+STATUS_HZ = 2.0                 # plant_node's and vision_node's
+STATS_WINDOW = 100              # frames in the vision latency statistics, as vision_node
+
+TYPES = {
+    names.CLOCK: 'rosgraph_msgs/msg/Clock',
+    names.IMU: 'sensor_msgs/msg/Imu',
+    names.ODOM: 'nav_msgs/msg/Odometry',
+    names.EE_WRENCH: 'geometry_msgs/msg/WrenchStamped',
+    names.ACTUATORS_CMD: 'sensor_msgs/msg/JointState',
+    names.ACTUATORS_STATE: 'sensor_msgs/msg/JointState',
+    names.GROUND_TRUTH_ODOM: 'nav_msgs/msg/Odometry',
+    names.GROUND_TRUTH_TARGET: 'geometry_msgs/msg/PoseStamped',
+    names.PLANT_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+    names.CONTROLLER_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+}
+VISION_TYPES = {
+    names.CAMERA_INFO: 'sensor_msgs/msg/CameraInfo',
+    names.TARGET_CANDIDATES: 'sensor_msgs/msg/PointCloud2',
+    names.TARGET_POSE: 'geometry_msgs/msg/PoseWithCovarianceStamped',
+    names.VISION_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+}
+
+
+def absolute(topic, namespace=names.NAMESPACE):
+    """The recorded name of a topic of :mod:`uav_tilt_common.names`."""
+    return topic if topic.startswith('/') else namespace.rstrip('/') + '/' + topic
+
+
+class FlightBag:
+    """Per-tick recorder of a Flight into one MCAP file; call :meth:`close` at the end."""
+
+    def __init__(self, path, controller_config, camera_config, vision=None):
+        """``vision``: the flight's CameraVision (its frames give target/* and the camera
+        info), or None when the target comes from ground truth."""
+        from uav_tilt_tools.mcap_bag import McapBag
+        self.bag = McapBag(path)
+        self.config = controller_config
+        self.camera = camera_config
+        self.vision = vision
+        types = dict(TYPES, **(VISION_TYPES if vision is not None else {}))
+        for topic, type_name in types.items():
+            self.bag.add_topic(absolute(topic), type_name)
+        self._flight = None
+        self._saturated_ticks = 0
+        self._window = (time.time_ns(), 0)     # (wall ns, tick) at the last status
+        self._frame_stamp = None
+        self._vision_window = (time.time_ns(), 0)
+        self._latency_ms = collections.deque(maxlen=STATS_WINDOW)
+        self._frames = self._found = 0
+
+    def _write(self, topic, msg, log_ns):
+        self.bag.write(absolute(topic), serialize_message(msg), log_ns)
+
+    def __call__(self, flight, sensors, command):
+        """One tick: the plant's sensors, the controller's command and statuses."""
+        now = time.time_ns()
+        plant = flight.plant
+        if self._flight is None:
+            self._flight = flight
+            self._write_target(flight, now)
+        stamp = ros_msgs.to_stamp(sensors.t_s)
+        self._write(names.CLOCK, Clock(clock=stamp), now)
+        self._write(names.ODOM, ros_msgs.odometry_msg(sensors.odom, stamp), now)
+        self._write(names.EE_WRENCH, ros_msgs.wrench_msg(sensors.ee_force_n,
+                                                         sensors.ee_torque_nm, stamp), now)
+        self._write(names.ACTUATORS_STATE,
+                    ros_msgs.actuator_msg(sensors.thrusts_n, sensors.tilts_rad, stamp), now)
+        self._write(names.GROUND_TRUTH_ODOM, ros_msgs.odometry_msg(plant.state(), stamp), now)
+        self._write(names.IMU, ros_msgs.imu_msg(sensors.gyro_rad_s, sensors.accel_m_s2,
+                                                sensors.q_imu, stamp), now)
+        self._write(names.ACTUATORS_CMD, ros_msgs.actuator_msg(
+            command.thrusts_n, (command.alpha_rad, command.beta_rad), stamp), now)
+        self._saturated_ticks += int(flight.status.get('saturated', False))
+        if self.vision is not None:
+            self._write_frame()
+        ticks_per_s = 1.0 / plant.dt_tick
+        if plant.tick % max(1, round(ticks_per_s / CONTROLLER_STATUS_HZ)) == 0:
+            self._write_controller_status(flight, now)
+        if plant.tick % max(1, round(ticks_per_s / STATUS_HZ)) == 0:
+            self._write_plant_status(flight, sensors, now)
+            if self.vision is not None:
+                self._write_vision_status(now)
+
+    def close(self):
+        """The last statuses (the outcome of the mission), then complete the file."""
+        if self.bag.closed:
+            return
+        if self._flight is not None:
+            self._write_controller_status(self._flight, time.time_ns())
+        self.bag.close()
+
+    # --- what each node would publish ------------------------------------------------
+    def _write_target(self, flight, now):
+        world = flight.plant.world
+        if world.target_poi_map is None:
+            return
+        q = Rotation.from_matrix(world.R_map_target).as_quat()
+        self._write(names.GROUND_TRUTH_TARGET, ros_msgs.pose_stamped_msg(
+            world.target_poi_map, q, ros_msgs.to_stamp(0.0)), now)
+
+    def _write_frame(self):
+        """camera_info when the image was ready, target/* when vision was done with it."""
+        frame = self.vision.last_frame
+        if frame is None or frame[0] == self._frame_stamp:
+            return
+        from uav_tilt_vision.vision_node import pose_msg
+        t_s, result, rendered_ns, processed_ns = frame
+        self._frame_stamp = t_s
+        stamp = ros_msgs.to_stamp(t_s)
+        self._write(names.CAMERA_INFO, ros_msgs.camera_info_msg(self.camera, stamp), rendered_ns)
+        self._write(names.TARGET_CANDIDATES, ros_msgs.candidates_msg(result.candidates, stamp),
+                    processed_ns)
+        self._write(names.TARGET_POSE, pose_msg(result, stamp), processed_ns)
+        self._latency_ms.append((processed_ns - rendered_ns) * 1e-6)
+        self._frames += 1
+        self._found += int(result.found)
+
+    def _write_controller_status(self, flight, now):
+        """controller/status as controller_node's, its loop rate over the wall clock."""
+        status = flight.status
+        wall_ns, tick = self._window
+        self._window = (now, flight.plant.tick)
+        values = dict(status) or dict(mode=WAITING_FOR_SENSORS)
+        values.update(ticks=flight.plant.tick, saturated_ticks=self._saturated_ticks,
+                      target_source=self.config.target_source, rejected_inputs=0,
+                      contact_force=self.config.contact_force)
+        if now > wall_ns and flight.plant.tick > tick:
+            values['loop_rate_hz'] = (flight.plant.tick - tick) / ((now - wall_ns) * 1e-9)
+        level = DiagnosticStatus.WARN if values.get('failsafe_reason') else DiagnosticStatus.OK
+        self._write(names.CONTROLLER_STATUS, ros_msgs.diagnostics_msg(
+            'controller', values, ros_msgs.to_stamp(values.get('t_s', 0.0)), level,
+            values.get('failsafe_reason') or 'ok'), now)
+
+    def _write_plant_status(self, flight, sensors, now):
+        plant = flight.plant
+        values = dict(mode='inprocess', sim_time_s=plant.t_s, tick=plant.tick,
+                      in_contact=sensors.in_contact, rejected_commands=0)
+        self._write(names.PLANT_STATUS, ros_msgs.diagnostics_msg(
+            'plant', values, ros_msgs.to_stamp(plant.t_s)), now)
+
+    def _write_vision_status(self, now):
+        wall_ns, frames = self._vision_window
+        self._vision_window = (now, self._frames)
+        detector = self.vision.pipeline.detector
+        values = dict(backend=detector.backend, model=detector.model_path,
+                      fps=(self._frames - frames) / max((now - wall_ns) * 1e-9, 1e-9),
+                      frames_processed=self._frames, targets_found=self._found)
+        if self._latency_ms:
+            latency = np.asarray(self._latency_ms)
+            values.update(latency_ms_p50=float(np.percentile(latency, 50)),
+                          latency_ms_p95=float(np.percentile(latency, 95)))
+        stamp = ros_msgs.to_stamp(self._frame_stamp or 0.0)
+        self._write(names.VISION_STATUS, ros_msgs.diagnostics_msg('vision', values, stamp), now)

@@ -1,0 +1,325 @@
+"""Gymnasium environment ``uav_tilt/ContactInspection-v0``: learning the touch on a wall.
+
+``import uav_tilt_tools.gym_env`` registers it, so that
+``gymnasium.make('uav_tilt/ContactInspection-v0', **options)`` works;
+``gymnasium.make('uav_tilt_tools.gym_env:uav_tilt/ContactInspection-v0')`` imports and
+registers in one go (what vector environments in spawned processes need). Options are the
+fields of :class:`ContactEnvConfig`.
+
+The environment wraps the in-process plant and controller cores (:class:`Flight`, the same
+as the nodes and ``uav-tilt fly``). Each reset draws a world of the campaign
+(:func:`uav_tilt_tools.campaign.random_draw`, seeded from the environment's generator) and
+lets the mission fly takeoff, search and approach by itself; the episode starts when the
+mission reaches the wall (it enters CONTACT at the stand-off, facing the target) and covers
+the touch: CONTACT (close in, creep until the tool feels the wall, press) and HOLD. With
+``start='takeoff'`` the episode is the whole mission from the ground instead (the action
+acts near the wall only; a reset is then a fraction of a second instead of the flight-in's
+tens of simulated seconds).
+
+**Action: an offset of the impedance law's setpoint, not its gains.** Box(-1, 1, (3,)):
+a shift of the desired position lambda_d along the wall (x_t, y_t, up to ``max_offset_m``)
+and a change of the push (up to ``max_force_offset_n``, turned into a depth along -z_t with
+the law's own K_z), added to the mission's setpoint in the target frame at
+``action_rate_hz`` and held over the 300 Hz control ticks in between. Why the setpoint:
+with fixed gains the closed loop stays eq. (6), a passive mass-spring-damper about the
+desired position, whatever the agent does, so a policy can move where and how hard the
+tool pushes but cannot destabilise the contact (time-varying K and C can pump energy into
+it); the push is already K_z times the depth (DESIGN section 2), so a depth offset is a
+force command; and a zero action is exactly the mission's own controller, the baseline a
+policy learns a residual to. The mission's HOLD force loop (``mission.force_tau_s``)
+keeps correcting the depth; set ``controller={'mission.force_tau_s': 0}`` to leave the
+force regulation to the agent.
+
+**Observation** (Dict, float32, what the vehicle measures): ``error_t`` (6,) the impedance
+error e, e' of the noisy odometry against the setpoint in the target frame of the
+estimate; ``tip_t`` (3,) the tool tip in that frame (x, y along the wall from the POI,
+z off the surface); ``wrench`` (6,) the F/T reading (ee_link, N and N m); ``push_error_n``
+(1,) the measured push along the normal minus the setpoint; ``phase`` Discrete(5) (close,
+touch, press, hold, other); with ``camera=True`` also ``image`` (H, W, 3) uint8, the
+eye-in-hand camera at the end of the step. ``render_mode='rgb_array'`` renders that camera.
+
+**Reward** (from the simulator's truth): each control tick in HOLD earns
+:func:`touch_reward` = 1 - ((push - F_d) / force_scale_n)^2 - poi_error / poi_scale_m
+(push: the contact force along the normal; poi_error: the tip's distance from the POI
+along the surface, as the mission's metrics measure both), and a step's reward is the mean
+over its ticks; so an episode's return is (HOLD ticks / ticks per step) times one minus
+the mission's (force_rms_error_n / force_scale_n)^2 and poi_error_m / poi_scale_m.
+
+**Termination**: the hold completed (success); a failsafe of the mission (force limit, no
+contact, target lost, stale odometry), the contact lost in HOLD, a push above the force
+limit, the vehicle below ``ground_clearance_m`` near the wall or tilted past
+``max_tilt_deg``: each a failure, rewarded ``-failure_penalty``. Truncation after
+``episode_s`` of simulated time. ``info`` has the world seed, the mode and phase, the
+push and POI error, and at the end the ``outcome``.
+"""
+import dataclasses
+import math
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from uav_tilt_common.config import ConfigError, from_dict, nested, param, to_flat
+from uav_tilt_common.geometry import quat_to_matrix
+from uav_tilt_control.controller_core import TARGET_SOURCES, ControllerConfig
+from uav_tilt_common.modes import Mode
+from uav_tilt_control.mission import NEAR_WALL
+from uav_tilt_sim.plant import PlantCoreConfig
+
+ENV_ID = 'uav_tilt/ContactInspection-v0'
+PHASES = ('close', 'touch', 'press', 'hold', 'other')
+STARTS = ('wall', 'takeoff')
+ACTING = (Mode.CONTACT, Mode.HOLD, Mode.TARGET_LOST)   # modes the action offsets
+LIMIT_M, LIMIT_M_S, LIMIT_N, LIMIT_NM = 20.0, 20.0, 200.0, 20.0   # observation bounds
+
+
+@dataclasses.dataclass
+class ContactEnvConfig:
+    """Options of ContactInspection-v0 (``gymnasium.make(ENV_ID, **options)``)."""
+
+    action_rate_hz: float = param(30.0, lo=1.0, hi=300.0)  # a whole number of control ticks
+    start: str = param('wall', choices=STARTS)          # where an episode begins
+    camera: bool = param(False)                         # the camera image in the observation
+    target_source: str = param('ground_truth', choices=TARGET_SOURCES)
+    model_path: str = param('')                         # vision: '' = the deployed detector
+    detector_threads: int = param(1, lo=0, hi=256)      # 0: the libraries' defaults
+    max_offset_m: float = param(0.1, lo=0.0, hi=1.0)    # along the wall
+    max_force_offset_n: float = param(3.0, lo=0.0, hi=20.0)
+    episode_s: float = param(40.0, lo=0.1, hi=600.0)
+    flight_in_s: float = param(150.0, lo=1.0, hi=600.0)  # to reach the wall, else a redraw
+    max_redraws: int = param(5, lo=0, hi=100)
+    force_scale_n: float = param(5.0, lo=0.01, hi=100.0)
+    poi_scale_m: float = param(0.05, lo=1e-4, hi=10.0)
+    failure_penalty: float = param(100.0, lo=0.0, hi=1e6)
+    ground_clearance_m: float = param(0.2, lo=0.0, hi=10.0)
+    max_tilt_deg: float = param(60.0, lo=1.0, hi=180.0)
+    # the controller's parameters (uav-tilt fly --set names); its target_source is the above
+    controller: ControllerConfig = nested(ControllerConfig)
+
+
+def touch_reward(push_n, poi_error_m, setpoint_n, force_scale_n, poi_scale_m):
+    """The reward of a control tick in HOLD (arrays welcome)."""
+    return 1.0 - ((np.asarray(push_n) - setpoint_n) / force_scale_n) ** 2 \
+        - np.asarray(poi_error_m) / poi_scale_m
+
+
+def _box(limit, n):
+    return spaces.Box(-limit, limit, (n,), dtype=np.float32)
+
+
+class ContactInspectionEnv(gym.Env):
+    """The touch task of the inspection mission; see the module docstring."""
+
+    metadata = {'render_modes': ['rgb_array'], 'render_fps': 30}
+
+    def __init__(self, render_mode=None, **options):
+        if render_mode is not None and render_mode not in self.metadata['render_modes']:
+            raise ConfigError(f'render_mode {render_mode!r}: expected one of '
+                              f'{self.metadata["render_modes"]} or None')
+        self.render_mode = render_mode
+        self.cfg = cfg = from_dict(ContactEnvConfig, options)
+        cfg.controller.target_source = cfg.target_source
+        self.plant_config = PlantCoreConfig()
+        control_hz = self.plant_config.control_hz
+        self.ticks_per_step = max(1, int(round(control_hz / cfg.action_rate_hz)))
+        self.metadata = dict(self.metadata, render_fps=control_hz / self.ticks_per_step)
+        self.action_space = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
+        obs = dict(error_t=spaces.Box(np.float32([-LIMIT_M] * 3 + [-LIMIT_M_S] * 3),
+                                      np.float32([LIMIT_M] * 3 + [LIMIT_M_S] * 3)),
+                   tip_t=_box(LIMIT_M, 3),
+                   wrench=spaces.Box(np.float32([-LIMIT_N] * 3 + [-LIMIT_NM] * 3),
+                                     np.float32([LIMIT_N] * 3 + [LIMIT_NM] * 3)),
+                   push_error_n=_box(LIMIT_N, 1),
+                   phase=spaces.Discrete(len(PHASES)))
+        cam = self.plant_config.camera
+        if cfg.camera:
+            obs['image'] = spaces.Box(0, 255, (cam.height, cam.width, 3), dtype=np.uint8)
+        self.observation_space = spaces.Dict(obs)
+        self.flight = None
+        self._offset_t = np.zeros(3)
+        self._setpoint = None
+        self._frame = None          # (tick, rgb) of the last rendered image
+        self._info = {}
+
+    # --- gymnasium API --------------------------------------------------------------
+    def reset(self, *, seed=None, options=None):
+        """Draw a world, fly the mission to the wall; the first observation there."""
+        super().reset(seed=seed)
+        cfg = self.cfg
+        for redraws in range(cfg.max_redraws + 1):
+            world_seed = int(self.np_random.integers(0, 2**31 - 1))
+            if self._fly_in(world_seed):
+                break
+        else:
+            raise RuntimeError(f'the mission reached no wall in {cfg.max_redraws + 1} draws '
+                               f'(last world seed {world_seed})')
+        self._t0_s = self.flight.t_s
+        self._info = dict(world_seed=world_seed, redraws=redraws, flight_in_s=self._t0_s)
+        return self._observation(), self._step_info()
+
+    def step(self, action):
+        """Hold the setpoint offset of ``action`` over the ticks of one step."""
+        a = np.clip(np.asarray(action, dtype=float).reshape(3), -1.0, 1.0)
+        cfg, flight = self.cfg, self.flight
+        k_z = flight.core.flight.impedance.gains(contact=True)[0][2]
+        self._offset_t = np.array([a[0] * cfg.max_offset_m, a[1] * cfg.max_offset_m,
+                                   -a[2] * cfg.max_force_offset_n / k_z])
+        reward, outcome = 0.0, None
+        for _ in range(self.ticks_per_step):
+            flight.step()
+            reward += self._tick_reward()
+            outcome = self._outcome()
+            if outcome is not None:
+                break
+        reward /= self.ticks_per_step
+        terminated = outcome is not None
+        if terminated and outcome != 'success':
+            reward -= cfg.failure_penalty
+        truncated = not terminated and flight.t_s - self._t0_s >= cfg.episode_s
+        info = self._step_info()
+        if terminated or truncated:
+            info['outcome'] = outcome or 'time_limit'
+        return self._observation(), float(reward), terminated, truncated, info
+
+    def render(self):
+        """The eye-in-hand camera (rgb_array), or None without a render mode."""
+        if self.render_mode is None or self.flight is None:
+            return None
+        return self._image()
+
+    def close(self):
+        """Release the physics server."""
+        if self.flight is not None:
+            self.flight.close()
+            self.flight = None
+
+    # --- the episode ------------------------------------------------------------------
+    def _fly_in(self, world_seed):
+        """A new flight in world ``world_seed`` (flown to the wall unless it starts at the
+        takeoff); False if it got none."""
+        from uav_tilt_tools.campaign import random_draw
+        from uav_tilt_tools.fly import site_overrides
+        from uav_tilt_tools.inprocess import Flight, camera_vision
+        self.close()
+        scenario, hint = random_draw(world_seed)
+        config = self.cfg.controller
+        if hint is not None:
+            config = from_dict(ControllerConfig, {**to_flat(config),
+                                                  **site_overrides(scenario, hint)})
+        vision = None
+        if self.cfg.target_source == 'vision':
+            from uav_tilt_vision.vision_node import REPO, VisionNodeConfig
+            vision = camera_vision(self.plant_config,
+                                   self.cfg.model_path or REPO / VisionNodeConfig().model_path,
+                                   threads=self.cfg.detector_threads)
+        self.flight = flight = Flight(scenario, config, plant_config=self.plant_config,
+                                      vision=vision)
+        self._offset_t = np.zeros(3)
+        self._frame = self._setpoint = None
+        flight.core.setpoint_hook = self._offset_setpoint
+        flight.step()
+        if not flight.core.inspect()[0]:
+            return False
+        if self.cfg.start == 'takeoff':      # once the controller has a setpoint
+            return flight.run(1.0, until=lambda f: self._setpoint is not None)
+        mission = flight.core.mission
+        flight.run(self.cfg.flight_in_s, until=lambda f: mission.mode in (Mode.CONTACT,
+                                                                          Mode.IDLE)
+                   or bool(f.status.get('failsafe_reason')))
+        return mission.mode == Mode.CONTACT and not flight.status.get('failsafe_reason')
+
+    def _offset_setpoint(self, setpoint):
+        """The controller's setpoint hook: the action's offset near the wall."""
+        if setpoint.contact_gains and self.flight.core.mission.mode in ACTING:
+            setpoint = dataclasses.replace(setpoint,
+                                           lambda_d_t=setpoint.lambda_d_t + self._offset_t)
+        self._setpoint = setpoint
+        return setpoint
+
+    def _truth(self):
+        """(push [N], POI error along the surface [m]) of the last tick, as the mission's
+        metrics measure them (:mod:`uav_tilt_tools.mission_metrics`): the F/T force along
+        the true normal, the true tip's distance from the true POI."""
+        from uav_tilt_tools.mission_metrics import poi_errors_m, push_along_normal
+        entry, world = self.flight.log[-1], self.flight.plant.world
+        push = push_along_normal(quat_to_matrix(entry['q_map_base']), entry['ft_force_ee_n'],
+                                 world.R_map_target)
+        poi = poi_errors_m(entry['tip_map'], world.target_poi_map, world.R_map_target[:, 2])
+        return push, float(poi[0])
+
+    def _tick_reward(self):
+        if self.flight.log[-1]['mode'] != Mode.HOLD.value:
+            return 0.0
+        push, poi = self._truth()
+        cfg = self.cfg
+        return float(touch_reward(push, poi, cfg.controller.contact_force, cfg.force_scale_n,
+                                  cfg.poi_scale_m))
+
+    def _outcome(self):
+        """None while the touch goes on, else 'success' or what ended it."""
+        flight, cfg = self.flight, self.cfg
+        status = flight.status
+        if status.get('inspection_completed'):
+            return 'success'
+        if status.get('failsafe_reason'):
+            return status['failsafe_reason']
+        if status.get('contact_lost'):
+            return 'contact_lost'
+        if flight.log[-1]['push_n'] > cfg.controller.mission.force_limit_n:
+            return 'force_limit'
+        truth = flight.plant.state()
+        near_wall = flight.core.mission.mode in NEAR_WALL   # (takeoff starts on the ground)
+        if near_wall and truth.p_map[2] < cfg.controller.mission.ground_z_m \
+                + cfg.ground_clearance_m:
+            return 'ground'
+        z_body = quat_to_matrix(truth.q_map_base)[:, 2]
+        if math.degrees(math.acos(min(1.0, max(-1.0, z_body[2])))) > cfg.max_tilt_deg:
+            return 'crash'
+        return None
+
+    def _observation(self):
+        flight, sp = self.flight, self._setpoint
+        odom, sensors = flight.sensors.odom, flight.sensors
+        R, origin = sp.R_map_t, sp.origin_map
+        p_t = R.T @ (odom.p_map - origin)
+        tip_t = R.T @ (odom.p_map + quat_to_matrix(odom.q_map_base)[:, 0]
+                       * flight.vehicle.tool_tip_x_m - origin)
+        error = np.concatenate((p_t - sp.lambda_d_t, R.T @ odom.v_map - sp.dlambda_d_t))
+        space = self.observation_space.spaces
+        obs = dict(
+            error_t=np.clip(error, space['error_t'].low, space['error_t'].high),
+            tip_t=np.clip(tip_t, -LIMIT_M, LIMIT_M),
+            wrench=np.clip(np.concatenate((sensors.ee_force_n, sensors.ee_torque_nm)),
+                           space['wrench'].low, space['wrench'].high),
+            push_error_n=np.clip([flight.core.f_normal_n - self.cfg.controller.contact_force],
+                                 -LIMIT_N, LIMIT_N))
+        obs = {k: v.astype(np.float32) for k, v in obs.items()}
+        obs['phase'] = self._phase()
+        if self.cfg.camera:
+            obs['image'] = self._image()
+        return obs
+
+    def _phase(self):
+        mission = self.flight.core.mission
+        if mission.mode == Mode.HOLD:
+            return PHASES.index('hold')
+        if mission.mode == Mode.CONTACT and mission.phase in PHASES:
+            return PHASES.index(mission.phase)
+        return PHASES.index('other')
+
+    def _image(self):
+        """The camera image of the current tick, rendered once."""
+        tick = self.flight.plant.tick
+        if self._frame is None or self._frame[0] != tick:
+            self._frame = (tick, self.flight.plant.render()[0])
+        return self._frame[1].copy()
+
+    def _step_info(self):
+        push, poi = self._truth()
+        mission = self.flight.core.mission
+        return dict(self._info, t_s=float(self.flight.t_s), mode=mission.mode.value,
+                    phase=mission.phase, push_n=float(push), poi_error_m=poi)
+
+
+if ENV_ID not in gym.registry:
+    gym.register(id=ENV_ID, entry_point=f'{__name__}:ContactInspectionEnv')
