@@ -142,3 +142,40 @@ def test_report_command_reads_the_mcap_and_writes_summary_and_plots(tmp_path):
     # No actuator or vision topics were recorded: those plots are left out.
     assert not (tmp_path / 'actuators.png').exists()
     assert not (tmp_path / 'vision.png').exists()
+
+
+def _plan_message(tasks):
+    from std_msgs.msg import String
+    return String(data=json.dumps({'tasks': tasks, 'wall': None}))
+
+
+def test_per_task_results_from_the_recorded_plan(tmp_path):
+    """A touch (HOLD_FIRST..HOLD_LAST) and a slide window over the same synthetic run: the
+    touch's keys as the top level's, the slide's path error is the tip's distance from its
+    line in the wall's plane (the normal part, the push's depth, left out)."""
+    push = 5.0 + np.where(np.arange(N) % 2 == 0, 0.2, -0.2)
+    rec, t = synthetic_recording(push)
+    tip = POI + TIP_OFFSET
+    line = [(tip + [0.03, 0.02, z]).tolist() for z in (-0.5, 0.5)]   # 3 cm deep, 2 cm aside
+    rec[names.CONTROLLER_PLAN] = [(wall_ns(0.0), _plan_message([
+        dict(index=0, kind='touch', target='', force_n=6.0, success=True, reason='',
+             contact_lost=0, t_contact_s=[HOLD_FIRST, HOLD_LAST]),
+        dict(index=1, kind='slide', force_n=5.0, success=False, reason='off_line',
+             contact_lost=2, t_contact_s=[0.2, 0.4], points_map=line,
+             normal_map=[-1.0, 0.0, 0.0], length_m=1.0, points_uv=[[0.0, 1.0], [0.0, 2.0]])]))]
+    tasks = report.summarize(rec, TOOL_X)['tasks']
+    touch, slide = tasks
+    held = push[(t >= HOLD_FIRST) & (t < HOLD_LAST)]
+    assert touch['success'] and touch['target'] == ''
+    assert touch['poi_error_m'] == pytest.approx(0.05, abs=1e-9)
+    assert touch['force_mean_n'] == pytest.approx(held.mean(), abs=1e-9)
+    assert touch['force_rms_error_n'] == pytest.approx(np.sqrt(np.mean((held - 6.0) ** 2)))
+    slid = push[(t >= 0.2) & (t < 0.4)]
+    assert (slide['success'], slide['reason'], slide['contact_lost']) == (False, 'off_line', 2)
+    assert slide['path_rms_error_m'] == pytest.approx(0.02, abs=1e-9)
+    assert slide['path_max_error_m'] == pytest.approx(0.02, abs=1e-9)
+    assert slide['length_m'] == pytest.approx(0.0, abs=1e-12)          # it did not move
+    assert slide['duration_s'] == pytest.approx(0.2 - DT, abs=DT / 2)
+    assert slide['force_rms_error_n'] == pytest.approx(np.sqrt(np.mean((slid - 5.0) ** 2)))
+    written = write_plots(rec, str(tmp_path), TOOL_X)
+    assert str(tmp_path / 'slides.png') in written

@@ -15,10 +15,15 @@ class ConfigError(ValueError):
     """A parameter is missing, unknown, of the wrong type or out of range."""
 
 
-def param(default, lo=None, hi=None, choices=None, length=None, items=None):
-    """A config field with its allowed range [lo, hi], choices, fixed list length, or the
-    config dataclass ``items`` that every element of a list field must be."""
-    meta = {'lo': lo, 'hi': hi, 'choices': choices, 'length': length, 'items': items}
+def param(default, lo=None, hi=None, choices=None, length=None, items=None,
+          item_length=None):
+    """A config field with its allowed range [lo, hi], choices and fixed list length.
+
+    ``items``: what every element of a list field is: a config dataclass, or ``float`` or
+    ``str`` (which gives an empty default list its type); ``item_length``: every element
+    is itself a list of that many numbers in [lo, hi] (points)."""
+    meta = {'lo': lo, 'hi': hi, 'choices': choices, 'length': length, 'items': items,
+            'item_length': item_length}
     if isinstance(default, (list, dict)):
         return dataclasses.field(default_factory=lambda: type(default)(default), metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -68,10 +73,15 @@ def _check(name, value, default, meta):
         if length is not None and len(value) != length:
             raise ConfigError(
                 f"parameter '{name}' = {list(value)!r} must have {length} elements")
-        if meta.get('items') is not None:
-            return [v if isinstance(v, meta['items']) else
-                    from_dict(meta['items'], v, f'{name}[{i}].') for i, v in enumerate(value)]
-        item_default = default[0] if default else 0.0
+        items = meta.get('items')
+        if dataclasses.is_dataclass(items):
+            return [v if isinstance(v, items) else
+                    from_dict(items, v, f'{name}[{i}].') for i, v in enumerate(value)]
+        if meta.get('item_length') is not None:
+            point = {**meta, 'length': meta['item_length'], 'item_length': None,
+                     'items': float}
+            return [_check(f'{name}[{i}]', v, [], point) for i, v in enumerate(value)]
+        item_default = default[0] if default else ('' if items is str else 0.0)
         return [_check_scalar(name, v, item_default, meta) for v in value]
     return _check_scalar(name, value, default, meta)
 
@@ -107,6 +117,18 @@ def to_flat(cfg, prefix=''):
             out.update(to_flat(value, prefix + f.name + '.'))
         else:
             out[prefix + f.name] = value
+    return out
+
+
+def flat_fields(cls, prefix=''):
+    """(dotted name, default, field metadata) of every leaf field of config ``cls``."""
+    out = []
+    for f in dataclasses.fields(cls):
+        default = _default_of(f)
+        if dataclasses.is_dataclass(default):
+            out.extend(flat_fields(type(default), prefix + f.name + '.'))
+        else:
+            out.append((prefix + f.name, default, f.metadata))
     return out
 
 

@@ -3,9 +3,14 @@ import signal
 import sys
 
 import rclpy
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException
+from rclpy.parameter import Parameter
 
-from uav_tilt_common.config import ConfigError, from_dict, to_flat
+from uav_tilt_common.config import ConfigError, flat_fields, from_dict
+
+# The parameter type of an empty list field, by its items (uav_tilt_common.config.param).
+_ARRAY_TYPES = {float: Parameter.Type.DOUBLE_ARRAY, str: Parameter.Type.STRING_ARRAY}
 
 
 def declare_config(node, cls):
@@ -13,14 +18,22 @@ def declare_config(node, cls):
 
     Raises ConfigError (one line naming the parameter, value and allowed range).
     """
-    defaults = to_flat(cls())
     values = {}
-    for name, default in defaults.items():
-        # Empty lists cannot carry a parameter type; those fields are not ROS parameters.
-        if isinstance(default, list) and not default:
-            continue
-        param = node.declare_parameter(name, default)
-        values[name] = param.value
+    for name, default, meta in flat_fields(cls):
+        try:
+            if isinstance(default, list) and not default:
+                # an empty list has no type of its own: the field's items give it one,
+                # and the parameter is declared typed, without a value
+                kind = _ARRAY_TYPES.get(meta.get('items'))
+                if kind is None or meta.get('item_length') is not None:
+                    continue
+                value = node.declare_parameter(name, kind).value
+                if value is not None:
+                    values[name] = list(value)
+                continue
+            values[name] = node.declare_parameter(name, default).value
+        except InvalidParameterTypeException as err:
+            raise ConfigError(f"parameter '{name}': {err}") from None
     return from_dict(cls, values)
 
 

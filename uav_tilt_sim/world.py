@@ -25,6 +25,7 @@ class ObjectInstance:
     body: int
     centre_map: np.ndarray      # centre of its front face
     target: bool
+    id: str = ''
 
 
 @dataclasses.dataclass
@@ -38,8 +39,9 @@ class WorldInfo:
     ground_body: int
     objects: list
     wall_visual: Visual = None                 # the wall's textured face
-    target_poi_map: np.ndarray = None      # point of interest on the target's front face
+    target_poi_map: np.ndarray = None      # point of interest on the (first) target's face
     R_map_target: np.ndarray = None        # z = surface normal out of the wall
+    targets: dict = dataclasses.field(default_factory=dict)  # id -> (poi_map, R_map_target)
 
     def body_classes(self):
         """PyBullet body id -> object class (for segmentation labels)."""
@@ -74,8 +76,11 @@ def build_world(client, scenario, texture_rng=None, scene=None):
     for obj, cfg in zip(objects, scenario.objects):
         if cfg.target:
             du, dv = (np.asarray(textures.POI_UV[cfg.cls]) - 0.5) * textures.OBJECT_SIZE_M
-            info.target_poi_map = obj.centre_map + R[:, 0] * du - R[:, 1] * dv
-            info.R_map_target = R.copy()
+            poi = obj.centre_map + R[:, 0] * du - R[:, 1] * dv
+            if info.target_poi_map is None:
+                info.target_poi_map, info.R_map_target = poi, R.copy()
+            if cfg.id:
+                info.targets[cfg.id] = (poi, R.copy())
     return info
 
 
@@ -105,4 +110,4 @@ def _build_object(client, scene, cfg, origin, R, quat, rng, wall):
     face = Visual(QUAD, (half, half), texture=textures.object_texture(cfg.cls, rng))
     body = create_static_body(client, scene, face, front, quat, col)
     _set_contact(client, body, wall)
-    return ObjectInstance(cfg.cls, body, front, cfg.target)
+    return ObjectInstance(cfg.cls, body, front, cfg.target, cfg.id)

@@ -4,20 +4,24 @@ Each run is ``uav-tilt fly`` (uav_tilt_tools.fly, the same cores as the nodes) o
 of :func:`random_draw`, spread over the CPU cores; the JSON (DESIGN section 7) holds n,
 successes, success_rate, its 95% Wilson interval, the failures by reason and one entry per
 run. Targets come from ground truth by default; ``--target-source vision`` renders the
-camera and runs the deployed detector pipeline in each run.
+camera and runs the deployed detector pipeline in each run. With ``--plan FILE --scenario
+FILE`` each run flies the plan on the scenario's wall and objects, the rest of the world
+(seed, wind, noise, model mismatch, the wall's stiffness and friction) drawn as above.
 """
 import collections
+import dataclasses
 import json
 import math
 import multiprocessing
 import os
+import sys
 
 import numpy as np
 
-from uav_tilt_common.config import from_dict
+from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_tools.fly import jsonable
 from uav_tilt_common.targets import OBJECT_CLASSES
-from uav_tilt_sim.scenario import Scenario, check_scenario
+from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
 
 # The world a campaign draws from.
 START_YAW_DEG = 180.0         # vehicle heading at takeoff, from the direction to the wall
@@ -102,13 +106,25 @@ def _wrap_deg(angle):
     return (angle + 180.0) % 360.0 - 180.0
 
 
+def with_conditions(scenario, drawn):
+    """``scenario``'s wall and objects under the seed, wind, noise, mismatch and wall
+    contact of the drawn scenario ``drawn`` (a plan's campaign)."""
+    wall = dataclasses.replace(scenario.wall, stiffness_n_per_m=drawn.wall.stiffness_n_per_m,
+                               friction=drawn.wall.friction)
+    return dataclasses.replace(scenario, seed=drawn.seed, wall=wall, wind=drawn.wind,
+                               noise=drawn.noise, mismatch=drawn.mismatch)
+
+
 def run_one(job):
     """One campaign run (top level so that worker processes can pickle it)."""
-    index, seed, target_source, duration_s = job
+    index, seed, target_source, duration_s, plan_file, scenario_file = job
     # Imported here so that each worker process builds its own physics server.
     from uav_tilt_tools.fly import fly, site_overrides
     scenario, hint = random_draw(seed)
     overrides = site_overrides(scenario, hint) if hint is not None else {}
+    if plan_file:
+        scenario, hint = with_conditions(load_scenario(scenario_file), scenario), None
+        overrides = {**site_overrides(scenario), 'plan_file': plan_file}
     result = fly(scenario, target_source, overrides, duration_s)
     result.update(index=index, seed=seed, hint_uv_m=hint,
                   wall_distance_m=float(np.hypot(*scenario.wall.position_m)),
@@ -130,10 +146,12 @@ def wilson_interval(successes, n, z=1.96):
 
 
 def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=DURATION_S,
-             progress=True):
-    """Run ``n`` randomised missions; returns the DESIGN section 7 JSON dict."""
+             progress=True, plan_file=None, scenario_file=None):
+    """Run ``n`` randomised missions (of the plan ``plan_file`` on ``scenario_file``'s
+    wall when given); returns the DESIGN section 7 JSON dict."""
     seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=n)
-    jobs = [(i, int(s), target_source, duration_s) for i, s in enumerate(seeds)]
+    jobs = [(i, int(s), target_source, duration_s, plan_file, scenario_file)
+            for i, s in enumerate(seeds)]
     workers = workers or min(n, os.cpu_count() or 1)
     runs = []
     with multiprocessing.get_context('spawn').Pool(workers) as pool:
@@ -158,8 +176,13 @@ def register(sub):
     parser.add_argument('--n', type=int, default=20)
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--workers', type=int, default=None)
-    parser.add_argument('--duration', type=float, default=DURATION_S,
-                        help='simulated seconds allowed per mission')
+    parser.add_argument('--duration', type=float, default=None,
+                        help=f'simulated seconds allowed per mission (default {DURATION_S:.0f}'
+                             f' per task)')
+    parser.add_argument('--plan', default=None, metavar='FILE',
+                        help='fly this inspection plan (needs --scenario) in every run')
+    parser.add_argument('--scenario', default=None, metavar='FILE',
+                        help="with --plan: the scenario whose wall and objects it names")
     parser.add_argument('--target-source', choices=('ground_truth', 'vision'),
                         default='ground_truth',
                         help='vision: render the camera and run the deployed detector')
@@ -167,6 +190,17 @@ def register(sub):
 
 
 def _run(args):
-    result = campaign(args.n, args.seed, args.workers, args.target_source, args.duration)
+    if bool(args.plan) != bool(args.scenario):
+        print('uav-tilt campaign: --plan and --scenario go together', file=sys.stderr)
+        return 2
+    if args.plan:
+        from uav_tilt_tools.fly import check_plan
+        try:
+            check_plan(load_scenario(args.scenario), args.plan)
+        except (OSError, ConfigError) as err:
+            print(f'uav-tilt campaign: {err}', file=sys.stderr)
+            return 2
+    result = campaign(args.n, args.seed, args.workers, args.target_source, args.duration,
+                      plan_file=args.plan, scenario_file=args.scenario)
     print(json.dumps(result, default=jsonable))
     return 0 if result['n'] else 1

@@ -14,6 +14,7 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.mission import Mode
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
+from uav_tilt_tools.task_metrics import task_results
 
 
 class Flight:
@@ -36,8 +37,11 @@ class Flight:
         self.tick_s = []            # wall-clock compute time of each ControllerCore.tick
         world = self.plant.world
         if world.target_poi_map is not None:
-            self.core.on_ground_truth_target(world.target_poi_map,
-                                             Rotation.from_matrix(world.R_map_target).as_quat())
+            # as plant_node's latched ground_truth/target and ground_truth/targets/<id>
+            truths = {'': (world.target_poi_map, world.R_map_target), **world.targets}
+            for target_id, (poi_map, R_map_target) in truths.items():
+                self.core.on_ground_truth_target(
+                    poi_map, Rotation.from_matrix(R_map_target).as_quat(), target_id)
 
     @property
     def t_s(self):
@@ -59,9 +63,12 @@ class Flight:
                                          sensors.accel_m_s2)
         self.tick_s.append(time.perf_counter() - start)
         truth = plant.state()
+        force_map = self._true_force_map(sensors.in_contact)
         self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
-                             push_n=self._true_push_n(sensors.in_contact), command=command))
+                             force_map=force_map,
+                             push_n=float(force_map @ self.plant.world.R_map_wall[:, 2]),
+                             task_index=self.status.get('task_index', -1), command=command))
         plant.step(command)
 
     def run(self, duration_s, until=None):
@@ -76,28 +83,28 @@ class Flight:
         """Release the physics server."""
         self.plant.close()
 
-    def _true_push_n(self, in_contact):
-        """Contact force on the wall along -normal [N] from the plant's truth.
+    def _true_force_map(self, in_contact):
+        """Contact force on the vehicle [N, map] from the plant's truth; along the wall's
+        outward normal it is the push (positive pushing).
 
         ``in_contact`` (from read_sensors, which saw the true contact force) spares the
-        contact query on free-flight ticks, where the push is below 1e-6 N.
+        contact query on free-flight ticks, where the force is below 1e-6 N.
         """
-        world = self.plant.world
-        if world.R_map_target is None or not in_contact:
-            return 0.0
+        if not in_contact:
+            return np.zeros(3)
         force_ee, _ = self.plant.contact_wrench_ee()
-        R_map_base = quat_to_matrix(self.plant.state().q_map_base)
-        return float((R_map_base @ force_ee) @ world.R_map_target[:, 2])
+        return quat_to_matrix(self.plant.state().q_map_base) @ force_ee
 
 
-def mission_result(flight, contact_force_n):
-    """Summary of an inspection run (DESIGN section 7 ``summary.json`` names), plus the
-    mode history, where a failsafe fired and the first touch's peak push."""
+def mission_result(flight):
+    """Summary of a plan's run (DESIGN section 7 ``summary.json`` names): ``tasks``, one
+    entry per task (uav_tilt_tools.task_metrics), the first touch's results at the top
+    level as for an inspection, the mode history, where a failsafe fired and the first
+    touch's peak push."""
     log = flight.log
     modes = [entry['mode'] for entry in log]
     history = [(log[0]['t_s'], modes[0])] + [
         (log[i]['t_s'], modes[i]) for i in range(1, len(log)) if modes[i] != modes[i - 1]]
-    hold = [entry for entry in log if entry['mode'] == Mode.HOLD.value]
     push = np.array([entry['push_n'] for entry in log])
     world = flight.plant.world
     reason = flight.status.get('failsafe_reason', '')
@@ -105,6 +112,11 @@ def mission_result(flight, contact_force_n):
     fired = [e for e in events if reason and e['reason'] == reason]
     approached = [e['target_map'] for e in events if e['mode'] == Mode.APPROACH.value
                   and e['previous'] == Mode.SEARCH.value]
+    truths = {'': (world.target_poi_map, world.R_map_target), **world.targets} \
+        if world.target_poi_map is not None else {}
+    tasks = task_results(flight.core.plan_report()['tasks'],
+                         [e['t_s'] for e in log], [e['tip_map'] for e in log],
+                         [e['force_map'] for e in log], truths, world.R_map_wall[:, 2])
     result = dict(success=bool(flight.status.get('success', False)),
                   contact_lost=int(flight.status.get('contact_lost', 0)),
                   failsafe_reason=reason,
@@ -116,21 +128,15 @@ def mission_result(flight, contact_force_n):
                   poi_error_m=None, poi_error_max_m=None, force_mean_n=None,
                   force_rms_error_n=None, hold_time_s=0.0, hold_tip_map=None,
                   sim_time_s=float(flight.t_s), ticks=len(log),
-                  confirmed_target_map=approached[0] if approached else None)
+                  confirmed_target_map=approached[0] if approached else None,
+                  tasks=tasks)
     landed = [t for t, m in history[1:] if m == Mode.IDLE.value]
     result['mission_time_s'] = float(landed[-1] if landed else log[-1]['t_s'])
-    if hold and world.target_poi_map is not None:
-        # along the surface: a wall that gives way lets the tip sink in along the normal
-        normal = world.R_map_target[:, 2]
-        offsets = np.array([entry['tip_map'] - world.target_poi_map for entry in hold])
-        errors = np.linalg.norm(offsets - np.outer(offsets @ normal, normal), axis=1)
-        hold_push = np.array([entry['push_n'] for entry in hold])
-        result.update(hold_tip_map=np.mean([e['tip_map'] for e in hold], axis=0).tolist(),
-                      poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()),
-                      force_mean_n=float(hold_push.mean()),
-                      force_rms_error_n=float(np.sqrt(np.mean((hold_push - contact_force_n)
-                                                              ** 2))),
-                      hold_time_s=float(hold[-1]['t_s'] - hold[0]['t_s']))
+    touches = [task for task in tasks if task['kind'] == 'touch']
+    if touches:
+        result.update({key: touches[0][key] for key in (
+            'poi_error_m', 'poi_error_max_m', 'force_mean_n', 'force_rms_error_n',
+            'hold_time_s', 'hold_tip_map')})
     return result
 
 
@@ -147,7 +153,8 @@ def _first_touch_peak(log, push, window_s=0.25):
 
 def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None,
                 plant_config=None, vision=None):
-    """Fly the inspection mission (``inspect`` at t = 0) until landed or ``duration_s``.
+    """Fly the configured plan (``inspect`` at t = 0: the one-touch inspection unless
+    ``controller_config.plan_file`` names a plan) until landed or ``duration_s``.
 
     Returns :func:`mission_result`'s dict.
     """
@@ -159,7 +166,7 @@ def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None
         if not ok:
             raise RuntimeError(f'inspect refused: {message}')
         flight.run(duration_s, until=lambda f: f.core.mission.mode == Mode.IDLE)
-        return mission_result(flight, config.contact_force)
+        return mission_result(flight)
     finally:
         flight.close()
 

@@ -20,17 +20,20 @@ from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_common.ros_msgs import from_stamp
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.mission import DEFAULT_CONTACT_FORCE_N
+from uav_tilt_tools.task_metrics import task_results
 
 # What the report reads; the camera images and the noisy sensors stay on disk.
 REPORT_TOPICS = (names.CLOCK, names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
                  names.EE_WRENCH, names.ACTUATORS_STATE, names.ACTUATORS_CMD,
                  names.CONTROLLER_STATUS, names.VISION_STATUS, names.TARGET_POSE,
-                 names.CAMERA_INFO)
+                 names.CAMERA_INFO, names.CONTROLLER_PLAN)
+# ... and every topic under these (each target's ground truth, by its id)
+REPORT_PREFIXES = (names.GROUND_TRUTH_TARGETS + '/',)
 HOLD = 'HOLD'
 NOT_FLYING = ('IDLE', 'WAITING_FOR_SENSORS')
 SUMMARY_KEYS = ('success', 'poi_error_m', 'force_mean_n', 'force_rms_error_n', 'contact_lost',
                 'max_force_n', 'mission_time_s', 'rtf', 'controller_rate_hz', 'vision_fps',
-                'vision_latency_ms_p95')
+                'vision_latency_ms_p95', 'tasks')
 
 
 def register(sub):
@@ -69,8 +72,14 @@ def load_recording(run_dir, namespace=names.NAMESPACE, topics=REPORT_TOPICS):
     for path in paths:
         with open(path, 'rb') as stream:
             reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-            for _, channel, message, msg in reader.iter_decoded_messages(topics=list(absolute)):
-                rec.setdefault(absolute[channel.topic], []).append((message.log_time, msg))
+            wanted = dict(absolute)
+            summary = reader.get_summary()
+            for channel in summary.channels.values() if summary is not None else ():
+                relative = channel.topic[len(prefix):]
+                if channel.topic.startswith(prefix) and relative.startswith(REPORT_PREFIXES):
+                    wanted[channel.topic] = relative
+            for _, channel, message, msg in reader.iter_decoded_messages(topics=list(wanted)):
+                rec.setdefault(wanted[channel.topic], []).append((message.log_time, msg))
     return rec
 
 
@@ -130,6 +139,49 @@ def target_pose(rec):
     """(POI position, R_map_target) of ground_truth/target, or None."""
     msgs = rec.get(names.GROUND_TRUTH_TARGET)
     return _pose(msgs[-1][1].pose) if msgs else None
+
+
+def target_poses(rec):
+    """Target id ('' = the first target) -> (POI position, R_map_target) of the ground
+    truth topics."""
+    topics = {'': names.GROUND_TRUTH_TARGET, **{
+        topic[len(names.GROUND_TRUTH_TARGETS) + 1:]: topic for topic in rec
+        if topic.startswith(names.GROUND_TRUTH_TARGETS + '/')}}
+    return {target_id: _pose(rec[topic][-1][1].pose) for target_id, topic in topics.items()
+            if rec.get(topic)}
+
+
+def plan_tasks(rec):
+    """The task entries of the last controller/plan (its JSON), or None."""
+    msgs = rec.get(names.CONTROLLER_PLAN)
+    return json.loads(msgs[-1][1].data)['tasks'] if msgs else None
+
+
+def wrench_series(rec, tool_tip_x_m):
+    """(t_s, tool tips (N, 3), contact force on the vehicle (N, 3)) in map, of each
+    ee_wrench with the vehicle's ground-truth pose at its stamp."""
+    poses = vehicle_poses(rec)
+    t, tips, forces = [], [], []
+    for _, m in rec.get(names.EE_WRENCH, ()):
+        pose = poses.get(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)
+        if pose is None:
+            continue
+        f = m.wrench.force
+        t.append(stamp_s(m))
+        tips.append(pose[0] + pose[1][:, 0] * tool_tip_x_m)
+        forces.append(pose[1] @ np.array([f.x, f.y, f.z]))
+    return np.array(t), np.array(tips).reshape(-1, 3), np.array(forces).reshape(-1, 3)
+
+
+def task_summaries(rec, tool_tip_x_m):
+    """summary.json ``tasks``: the recorded plan's results (uav_tilt_tools.task_metrics),
+    or None without a plan."""
+    tasks = plan_tasks(rec)
+    if tasks is None:
+        return None
+    targets = target_poses(rec)
+    normal = targets[''][1][:, 2] if '' in targets else None
+    return task_results(tasks, *wrench_series(rec, tool_tip_x_m), targets, normal)
 
 
 def vehicle_poses(rec):
@@ -258,5 +310,7 @@ def summarize(rec, tool_tip_x_m):
         vision_latency_ms_p95=vision_last.get(
             'latency_ms_p95', np.percentile(latency, 95) if len(latency) else None),
     )
-    return {k: (v if isinstance(v, (bool, int, type(None))) else _number(v))
-            for k, v in summary.items()}
+    summary = {k: (v if isinstance(v, (bool, int, type(None))) else _number(v))
+               for k, v in summary.items()}
+    summary['tasks'] = task_summaries(rec, tool_tip_x_m)
+    return summary

@@ -6,7 +6,7 @@ import matplotlib
 import numpy as np
 
 from uav_tilt_common import names
-from uav_tilt_tools import report
+from uav_tilt_tools import report, task_plots
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (after the headless backend is chosen)
@@ -22,7 +22,8 @@ def write_plots(rec, out_dir, tool_tip_x_m):
              ('force.png', lambda: plot_force(rec, ctrl, hold)),
              ('actuators.png', lambda: plot_actuators(rec)),
              ('poi_error.png', lambda: plot_poi_error(rec, tool_tip_x_m, hold)),
-             ('vision.png', lambda: plot_vision(rec)))
+             ('vision.png', lambda: plot_vision(rec)),
+             ('slides.png', lambda: task_plots.plot_slides(rec, tool_tip_x_m)))
     written = []
     for name, make in plots:
         fig = make()
