@@ -14,6 +14,9 @@ setup(
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/config/scenarios', glob('config/scenarios/*.yaml')),
+        # the detectors and their cards: vision_node's model_path is relative to these
+        ('share/' + PACKAGE + '/models', sorted(glob('models/*.onnx') + glob('models/*.pt')
+                                                + glob('models/*.json'))),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

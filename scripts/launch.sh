@@ -2,19 +2,26 @@
 # Start the uav_tilt node graph in namespace /uav, each node its own process (DESIGN §6).
 #
 # usage: scripts/launch.sh [--scenario F] [--realtime] [--record DIR] [--foxglove]
-#          [--mission inspect | --mission plan --plan FILE] [--no-vision] [--target-source S]
+#          [--mission inspect | --mission plan --plan FILE] [--no-vision]
+#          [--target-source vision|ground_truth] [--vision-only] [--param NODE.NAME:=VALUE]...
 #
 # Lockstep unless --realtime. With --mission plan the controller runs the plan FILE, its site
 # (the wall, the target ids) taken from the scenario as a survey would give it.
 # Ctrl-C or SIGTERM sends SIGINT to every node (as ros2 launch
 # does: every node shuts down cleanly on it); nodes still running after UAV_TILT_GRACE_S
-# (5, whole) seconds are killed. Exit 0 only when every node stopped cleanly and,
-# with --mission, the mission succeeded. Discovery is local-only unless
-# ROS_AUTOMATIC_DISCOVERY_RANGE is set; ROS_DOMAIN_ID passes through.
-# Executables come from .venv/bin, else PATH, else `python -m`.
+# (5, whole) seconds are killed. Should this script be killed outright (SIGKILL), its
+# nodes get SIGTERM from the kernel (UAV_TILT_PARENT_PID, uav_tilt_common/parent_watch.py).
+# Exit 0 only when every node stopped cleanly and, with --mission, the mission succeeded.
+# --vision-only starts vision alone: the companion computer's side of a two-computer run,
+# whose other side is --no-vision. --param sets one parameter of one node (plant,
+# controller, vision, recorder, foxglove), e.g. --param controller.contact_force:=4.0.
+# Discovery is local-only unless ROS_AUTOMATIC_DISCOVERY_RANGE is set; ROS_DOMAIN_ID and
+# ROS_STATIC_PEERS pass through. Executables come from .venv/bin, else PATH, else
+# `python -m`. At the end it prints the plant's timing (mode, achieved real-time factor,
+# late commands, dropped ticks).
 set -euo pipefail
 
-usage() { sed -n '4,5p' "${BASH_SOURCE[0]}" | sed 's/^# //'; }
+usage() { sed -n '4,6p' "${BASH_SOURCE[0]}" | sed 's/^# //'; }
 log() { echo "[launch] $*" >&2; }
 die() { log "$*"; usage >&2; exit 2; }
 
@@ -28,6 +35,8 @@ CONFIG=$REPO/config
 GRACE_S=${UAV_TILT_GRACE_S:-5}
 
 scenario='' realtime=0 record='' mission='' plan='' foxglove=0 vision=1 target_source=''
+vision_only=0
+PARAMS=()
 while (($#)); do
     case $1 in
         --scenario) scenario=${2:-}; [[ -n $scenario ]] || die '--scenario needs a file'; shift 2 ;;
@@ -45,6 +54,12 @@ while (($#)); do
             [[ $target_source == vision || $target_source == ground_truth ]] \
                 || die '--target-source: vision or ground_truth'
             shift 2 ;;
+        --vision-only) vision_only=1; shift ;;
+        --param)
+            [[ ${2:-} =~ ^(plant|controller|vision|recorder|foxglove)\.[A-Za-z0-9_.]+:= ]] \
+                || die "--param: NODE.NAME:=VALUE with NODE one of plant, controller, vision, recorder, foxglove"
+            PARAMS+=("$2")
+            shift 2 ;;
         -h | --help) usage; exit 0 ;;
         *) die "unknown argument: $1" ;;
     esac
@@ -54,12 +69,19 @@ if [[ $mission == plan && -z $plan ]] || [[ -n $plan && $mission != plan ]]; the
     die '--mission plan and --plan FILE go together'
 fi
 [[ -z $plan || -f $plan ]] || die "--plan: no file $plan"
+if ((vision_only)) && [[ -n $record$mission$scenario$target_source ]] \
+        || ((vision_only && (foxglove || !vision || realtime))); then
+    die '--vision-only starts vision alone: it takes no other option but --param'
+fi
 if ((!vision)) && [[ -n $mission && $target_source != ground_truth ]]; then
-    log 'warning: with --no-vision the controller gets no target (--target-source ground_truth?)'
+    log 'note: with --no-vision the controller gets its target from a vision node elsewhere' \
+        '(--vision-only on the companion computer) or none (--target-source ground_truth?)'
 fi
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE=${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}
 export PYTHONUNBUFFERED=1
+# Each node arms a parent-death signal against this pid (uav_tilt_common/parent_watch.py).
+export UAV_TILT_PARENT_PID=$$
 
 if [[ -x $REPO/.venv/bin/python ]]; then
     BIN=$REPO/.venv/bin
@@ -80,11 +102,37 @@ resolve() {
     fi
 }
 
-# CMD += the ROS arguments of node $1 (its parameter file, if any) and use_sim_time.
+# CMD += the ROS arguments of node $1: its parameter file (if any), use_sim_time (not for
+# the plant, which owns time, nor for the mission watcher, which only reads status: sim
+# time would cost it a /clock message every control tick) and the --param values given
+# for it (last, so that they win).
 ros_args() {
+    local p
     CMD+=(--ros-args -r __ns:=/uav)
     [[ ! -f $CONFIG/$1.yaml ]] || CMD+=(--params-file "$CONFIG/$1.yaml")
-    [[ $1 == plant ]] || CMD+=(-p use_sim_time:=true)
+    [[ $1 == plant || $1 == mission_watch ]] || CMD+=(-p use_sim_time:=true)
+    for p in ${PARAMS[@]+"${PARAMS[@]}"}; do
+        [[ $p != "$1".* ]] || CMD+=(-p "${p#"$1".}")
+    done
+}
+
+# --realtime: the plant and the controller (the 300 Hz loop) and vision run with real-time
+# scheduling (SCHED_FIFO, UAV_TILT_RT_PRIORITY, vision 10 below) where the user may use it,
+# so that other work on the machine does not delay a tick; the kernel keeps 5% of each core
+# for everything else. UAV_TILT_RT_PRIORITY=0 turns it off.
+RT_PRIORITY=${UAV_TILT_RT_PRIORITY:-50}
+rt_ok=0
+if ((realtime && RT_PRIORITY > 0)); then
+    if command -v chrt >/dev/null && chrt -f "$RT_PRIORITY" true 2>/dev/null; then
+        rt_ok=1
+    else
+        log "warning: real-time scheduling not permitted (chrt -f $RT_PRIORITY):" \
+            "the 300 Hz loop shares the cores with everything else"
+    fi
+fi
+# CMD := chrt -f PRIORITY CMD, with --realtime where permitted.
+realtime_priority() {
+    ((!rt_ok)) || CMD=(chrt -f "$1" "${CMD[@]}")
 }
 
 declare -A NAME_OF=() RUNNING=()
@@ -93,9 +141,12 @@ stop_signal=0
 trap 'stop_signal=1' INT TERM
 # Should this script fail, no node outlives it.
 # shellcheck disable=SC2329  # invoked by the EXIT trap
+# The plant writes its timing (real-time factor, late commands, ...) here at exit.
+PLANT_SUMMARY=$(mktemp "${TMPDIR:-/tmp}/uav_tilt_plant.XXXXXX")
 kill_all() {
     local p
     for p in "${!RUNNING[@]}"; do kill -s KILL -- "-$p" 2>/dev/null || true; done
+    rm -f "$PLANT_SUMMARY"
 }
 trap kill_all EXIT
 
@@ -112,12 +163,24 @@ start() {
     log "$name (pid $!): ${CMD[*]}"
 }
 
+if ((vision_only)); then
+    resolve vision_node uav_tilt_vision.vision_node
+    ros_args vision
+    start vision
+fi
 if [[ -n $record ]]; then
     mkdir -p "$record"
     resolve recorder_node uav_tilt_tools.recorder_node
     ros_args recorder
     CMD+=(-p "output:=$record")
     start recorder
+    # It listens once its file exists: wait for that (30 s at most), so that the plant's
+    # first tick is recorded.
+    recorder_pid=$!
+    for ((i = 0; i < 300 && !stop_signal; i++)); do
+        [[ ! -e $record/recording.mcap ]] && kill -0 "$recorder_pid" 2>/dev/null || break
+        sleep 0.1
+    done
 fi
 if [[ -n $mission ]]; then
     CMD=("$PY" -m uav_tilt_tools.mission_watch)
@@ -130,28 +193,37 @@ if ((foxglove)); then
     [[ -z $scenario ]] || CMD+=(-p "scenario_file:=$scenario")
     start foxglove
 fi
-if ((vision)); then
+if ((vision && !vision_only)); then
     resolve vision_node uav_tilt_vision.vision_node
     ros_args vision
+    realtime_priority $((RT_PRIORITY > 10 ? RT_PRIORITY - 10 : 1))
     start vision
 fi
-resolve controller_node uav_tilt_control.controller_node
-ros_args controller
-[[ -z $target_source ]] || CMD+=(-p "target_source:=$target_source")
-[[ -z $mission ]] || CMD+=(-p "autostart:=$mission")
-if [[ -n $plan ]]; then
-    # the site the plan is checked against: the scenario's wall and target ids
-    site=$("$PY" -m uav_tilt_tools.site_params "$scenario") || die 'bad scenario for the site'
-    mapfile -t SITE <<<"$site"
-    CMD+=(-p "plan_file:=$(realpath "$plan")" "${SITE[@]}")
+if ((!vision_only)); then
+    resolve controller_node uav_tilt_control.controller_node
+    ros_args controller
+    [[ -z $target_source ]] || CMD+=(-p "target_source:=$target_source")
+    [[ -z $mission ]] || CMD+=(-p "autostart:=$mission")
+    if [[ -n $plan ]]; then
+        # the site the plan is checked against: the scenario's wall and target ids
+        site=$("$PY" -m uav_tilt_tools.site_params "$scenario") || die 'bad scenario for the site'
+        mapfile -t SITE <<<"$site"
+        CMD+=(-p "plan_file:=$(realpath "$plan")" "${SITE[@]}")
+    fi
+    realtime_priority "$RT_PRIORITY"
+    start controller
+    # The plant owns time: it starts last, so that its first ticks find the others
+    # listening.
+    resolve plant_node uav_tilt_sim.plant_node
+    ros_args plant
+    [[ -z $scenario ]] || CMD+=(-p "scenario_file:=$scenario")
+    if ((realtime)); then CMD+=(-p mode:=realtime); else CMD+=(-p mode:=lockstep); fi
+    # Recorded lockstep runs start once the recorder listens to every plant topic.
+    [[ -z $record ]] || CMD+=(-p hold_until_recorded:=true)
+    CMD+=(-p "summary_file:=$PLANT_SUMMARY")
+    realtime_priority "$RT_PRIORITY"
+    start plant
 fi
-start controller
-# The plant owns time: it starts last, so that its first ticks find the others listening.
-resolve plant_node uav_tilt_sim.plant_node
-ros_args plant
-[[ -z $scenario ]] || CMD+=(-p "scenario_file:=$scenario")
-if ((realtime)); then CMD+=(-p mode:=realtime); else CMD+=(-p mode:=lockstep); fi
-start plant
 log "ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0} ROS_AUTOMATIC_DISCOVERY_RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE"
 
 failed=0
@@ -208,6 +280,7 @@ for pid in "${!NAME_OF[@]}"; do
     log "${NAME_OF[$pid]}: exit code $code"
     [[ $code == 0 ]] || failed=1
 done
+if [[ -s $PLANT_SUMMARY ]]; then log "plant timing: $(<"$PLANT_SUMMARY")"; fi
 if [[ -n $mission && $mission_code != 0 ]]; then
     log 'mission did not succeed'
     failed=1

@@ -49,7 +49,12 @@ def test_wilson_interval():
     low, high = cp.wilson_interval(19, 20)
     # the textbook value for 19 of 20 at 95%: [0.764, 0.991]
     assert low == pytest.approx(0.764, abs=1e-3) and high == pytest.approx(0.991, abs=1e-3)
-    assert cp.wilson_interval(20, 20)[1] == pytest.approx(1.0)
+    # all successes (or none): the rate lies inside its own interval, without rounding
+    for n in (1, 7, 20, 40, 333):
+        low, high = cp.wilson_interval(n, n)
+        assert low <= 1.0 == high
+        low, high = cp.wilson_interval(0, n)
+        assert low == 0.0 <= high
 
 
 def test_campaign_of_twenty_fresh_draws_succeeds_in_at_least_95_percent():

@@ -191,3 +191,32 @@ def test_force_above_the_limit_retreats():
         assert flight.log[-1]['push_n'] == 0.0
     finally:
         flight.close()
+
+
+def test_the_camera_rendering_or_not_leaves_wind_noise_and_trajectory_unchanged():
+    """One seed, one world: depth noise has its own random stream, so rendering the camera
+    (ground-truth target, frames unused) changes nothing the vehicle flies through."""
+    scenario = load_scenario('config/scenarios/windy.yaml')
+    assert scenario.wind.gust_std_m_s > 0 and scenario.noise.depth_m > 0
+
+    def fly(render):
+        def camera(plant, t_s):
+            if plant.tick % 10 == 0:
+                plant.render()
+            return None     # no frame for the controller
+        flight = Flight(scenario, _config(), vision=camera if render else None)
+        try:
+            flight.step()
+            assert flight.core.inspect()[0]
+            flight.run(8.0)
+            return np.array([np.concatenate([e['p_map'], e['q_map_base'], e['ft_force_ee_n']])
+                             for e in flight.log]), flight.plant.renderer_name
+        finally:
+            flight.close()
+
+    dark, no_renderer = fly(False)
+    seen, renderer = fly(True)
+    assert no_renderer is None and renderer is not None   # frames rendered, depth noise drawn
+    assert dark.shape == seen.shape and np.abs(dark - seen).max() <= 1e-9
+    # The wind blew: the vehicle did not fly the calm scenario's straight line.
+    assert np.ptp(dark[:, 1]) > 0.01

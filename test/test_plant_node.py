@@ -6,6 +6,8 @@ import time
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from ros_graph import start, stop
@@ -107,6 +109,53 @@ def test_realtime_mode_follows_the_wall_clock_and_streams_the_camera(tmp_path, p
         # The vehicle sits on the ground facing the wall 2.5 m ahead.
         centre = depth_m[100:140, 140:180]
         assert np.all((centre > 2.0) & (centre < 2.6))
+
+        # `ros2 param set`: a new rtf is honoured, a start-up-only parameter refused.
+        client = AsyncParameterClient(probe.node, '/uav/plant')
+        assert client.wait_for_services(10.0)
+        future = client.set_parameters([Parameter('rtf', value=2 * RTF),
+                                        Parameter('physics_hz', value=600.0)])
+        assert probe.spin_until(future.done, 10.0)
+        honoured, refused = future.result().results
+        assert honoured.successful and not refused.successful and 'read-only' in refused.reason
+        probe.spin_until(lambda: False, 0.5)
+        wall0, sim0 = time.monotonic(), float(latest_status(probe)['sim_time_s'])
+        probe.spin_until(lambda: False, 3.0)
+        wall1, sim1 = time.monotonic(), float(latest_status(probe)['sim_time_s'])
+        assert sim1 - sim0 == pytest.approx(2 * RTF * (wall1 - wall0), abs=0.3)
     finally:
         code, _ = stop(plant)
     assert code == 0
+
+
+def test_realtime_plant_that_cannot_keep_up_says_so(tmp_path, probe):
+    """Asked for 40x the wall clock with the camera on, no host keeps up: sim time slips,
+    the dropped ticks and the achieved factor are reported, a warning is logged, and the
+    summary file has the run's timing. Commands stamped with old ticks count as late."""
+    summary = tmp_path / 'summary.json'
+    plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
+                  params={'mode': 'realtime', 'rtf': 40.0, 'status_rate_hz': 10.0,
+                          'summary_file': str(summary)})
+    try:
+        probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
+        assert probe.spin_until(lambda: 'sim_time_s' in latest_status(probe), 30.0)
+        pub = probe.node.create_publisher(JointState, names.ACTUATORS_CMD, ros_qos.CONTROL)
+        assert probe.spin_until(lambda: pub.get_subscription_count() > 0, 10.0)
+        for _ in range(5):
+            pub.publish(ros_msgs.actuator_msg([0.0] * 4, (0.0, 0.0), ros_msgs.to_stamp(0.0)))
+        assert probe.spin_until(
+            lambda: int(latest_status(probe).get('late_commands', 0)) == 5, 10.0)
+        assert probe.spin_until(lambda: latest_status(probe).get('rtf_mean') not in
+                                (None, 'None'), 10.0)
+        probe.spin_until(lambda: False, 6.0)       # past the first warning period
+        status = latest_status(probe)
+        assert int(status['dropped_ticks']) > 0
+        assert 0.0 < float(status['rtf_mean']) < 40.0
+    finally:
+        code, _ = stop(plant)
+    assert code == 0
+    log = (tmp_path / 'plant.log').read_text()
+    assert 'not keeping up with the wall clock' in log, log
+    timing = json.loads(summary.read_text())
+    assert timing['mode'] == 'realtime' and timing['late_commands'] == 5
+    assert timing['dropped_ticks'] > 0 and 0.0 < timing['rtf'] < 40.0

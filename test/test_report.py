@@ -1,18 +1,24 @@
-"""uav-tilt report on synthetic recordings: exact summary values, plots, missing topics."""
+"""uav-tilt report on synthetic recordings: exact summary values, plots, missing topics,
+files the recorder did not finish."""
 import argparse
 import json
 import math
+import shutil
 
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo
 
 from uav_tilt_common import names, ros_msgs
 from uav_tilt_common.state import VehicleState
 from uav_tilt_common.vehicle import VehicleParams
-from uav_tilt_tools import report
+from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
+from uav_tilt_control.controller_node import _loop_stats
+from uav_tilt_control.mission import Mode
+from uav_tilt_tools import recording, report
 from uav_tilt_tools.mcap_bag import McapBag
 from uav_tilt_tools.report_plots import write_plots
 
@@ -36,12 +42,31 @@ def wall_ns(t):
     return int(1e12 + t * 2e9)
 
 
-def status(t, **values):
-    return ros_msgs.diagnostics_msg('controller', values, stamp(t))
+def controller_status(contact_force_n, loop_rate_hz=298.5):
+    """What controller_node publishes: a tick's status from the real ControllerCore with the
+    node's loop statistics (the mission keys are set per sample by the caller)."""
+    core = ControllerCore(VehicleParams(), ControllerConfig(contact_force=contact_force_n))
+    core.on_odometry(VehicleState(0.0, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]),
+                                  np.zeros(3), np.zeros(3)))
+    _, values = core.tick(0.0, np.zeros(3), 1.0 / 300)
+    values.update(_loop_stats([1.0 / loop_rate_hz] * 10, [1e-4] * 10, 1.0 / loop_rate_hz))
+    return values
 
 
-def synthetic_recording(push_n):
-    """Vehicle facing +x with its tool tip at POI + TIP_OFFSET, pushing ``push_n[k]``."""
+def status(t, base, **values):
+    return ros_msgs.diagnostics_msg('controller', dict(base, **values), stamp(t))
+
+
+def plant_statuses(t_end, rtf):
+    """plant/status every 0.5 s of sim time: sim_time_s and wall_time_s at ``rtf``."""
+    return [(wall_ns(t), ros_msgs.diagnostics_msg(
+        'plant', dict(sim_time_s=t, wall_time_s=3.0 + t / rtf), stamp(t)))
+        for t in np.arange(0.0, t_end, 0.5)]
+
+
+def synthetic_recording(push_n, contact_force_n=6.0):
+    """Vehicle facing +x with its tool tip at POI + TIP_OFFSET, pushing ``push_n[k]``; the
+    controller was asked for ``contact_force_n``."""
     t = np.arange(N) * DT
     p_body = POI + TIP_OFFSET - np.array([TOOL_X, 0.0, 0.0])
     rec = {names.GROUND_TRUTH_ODOM: [], names.EE_WRENCH: [], names.CLOCK: []}
@@ -59,12 +84,13 @@ def synthetic_recording(push_n):
     o = target.pose.orientation
     o.x, o.y, o.z, o.w = Q_TARGET
     rec[names.GROUND_TRUTH_TARGET] = [(wall_ns(0.0), target)]
-    modes = [(0.0, 'IDLE'), (0.1, 'TAKEOFF'), (0.3, 'CONTACT'), (HOLD_FIRST, 'HOLD'),
-             (1.0, 'HOLD'), (HOLD_LAST, 'HOLD'), (1.7, 'RETREAT'), (1.9, 'IDLE')]
+    modes = [(0.0, Mode.IDLE), (0.1, Mode.TAKEOFF), (0.3, Mode.CONTACT), (HOLD_FIRST, Mode.HOLD),
+             (1.0, Mode.HOLD), (HOLD_LAST, Mode.HOLD), (1.7, Mode.RETREAT), (1.9, Mode.IDLE)]
+    base = controller_status(contact_force_n)
     rec[names.CONTROLLER_STATUS] = [
-        (wall_ns(tc), status(tc, mode=mode, success=tc >= 1.9, contact_lost=1,
-                             contact_force=6.0, loop_rate_hz=298.5))
+        (wall_ns(tc), status(tc, base, mode=mode.value, success=tc >= 1.9, contact_lost=1))
         for tc, mode in modes]
+    rec[names.PLANT_STATUS] = plant_statuses(2.0, 0.5)
     return rec, t
 
 
@@ -74,40 +100,59 @@ def test_force_and_poi_metrics_are_exact_over_hold():
     rec, t = synthetic_recording(push)
     summary = report.summarize(rec, TOOL_X)
     held = push[(t >= HOLD_FIRST) & (t <= HOLD_LAST)]
+    assert summary['force_setpoint_n'] == 6.0
     assert summary['force_mean_n'] == pytest.approx(held.mean(), abs=1e-9)
     assert summary['force_rms_error_n'] == pytest.approx(
         math.sqrt(np.mean((held - 6.0) ** 2)), abs=1e-9)
-    assert summary['max_force_n'] == pytest.approx(math.hypot(12.0, 0.3), abs=1e-9)
+    # The push along the normal, not |F| (the 0.3 N of friction is along the wall).
+    assert summary['max_force_n'] == pytest.approx(12.0, abs=1e-9)
     assert summary['poi_error_m'] == pytest.approx(0.05, abs=1e-9)
+    assert summary['poi_error_max_m'] == pytest.approx(0.05, abs=1e-9)
+    assert summary['hold_time_s'] == pytest.approx(HOLD_LAST - HOLD_FIRST, abs=1e-9)
     assert summary['success'] is True
     assert summary['contact_lost'] == 1
     assert summary['mission_time_s'] == pytest.approx(1.8, abs=1e-9)
-    assert summary['rtf'] == pytest.approx(0.5, abs=1e-6)
+    assert summary['rtf'] == pytest.approx(0.5, abs=1e-9)
     assert summary['controller_rate_hz'] == pytest.approx(298.5)
     assert set(summary) == set(report.SUMMARY_KEYS)
 
 
-def test_default_setpoint_is_5_newton_without_contact_force_in_status():
+@pytest.mark.parametrize('asked_n', [4.0, 7.5])
+def test_the_push_is_scored_against_what_the_controller_was_asked(asked_n):
+    rec, _ = synthetic_recording(np.full(N, 5.0), contact_force_n=asked_n)
+    summary = report.summarize(rec, TOOL_X)
+    assert summary['force_setpoint_n'] == asked_n
+    assert summary['force_rms_error_n'] == pytest.approx(abs(5.0 - asked_n), abs=1e-9)
+
+
+def test_no_setpoint_in_the_status_gives_no_error_score():
     rec, _ = synthetic_recording(np.full(N, 5.0))
     for _, msg in rec[names.CONTROLLER_STATUS]:
-        msg.status[0].values = [kv for kv in msg.status[0].values if kv.key != 'contact_force']
-    assert report.summarize(rec, TOOL_X)['force_rms_error_n'] == pytest.approx(0.0, abs=1e-12)
+        msg.status[0].values = [kv for kv in msg.status[0].values
+                                if kv.key != 'contact_force_n']
+    summary = report.summarize(rec, TOOL_X)
+    assert summary['force_setpoint_n'] is None and summary['force_rms_error_n'] is None
+    assert summary['force_mean_n'] == pytest.approx(5.0)
 
 
-def test_vision_rate_and_latency_from_frames():
-    rec = {names.CAMERA_INFO: [], names.TARGET_POSE: []}
-    for k in range(31):               # 30 Hz sim, 10 ms image -> pose on the wall clock
+def test_vision_rate_and_latency_come_from_vision_status():
+    rec = {names.CAMERA_INFO: [], names.TARGET_POSE: [], names.VISION_STATUS: []}
+    for k in range(31):               # 30 Hz sim, 10 ms image -> pose on the recorder clock
         tk = k / 30
         info, pose = CameraInfo(), PoseWithCovarianceStamped()
         info.header.stamp = pose.header.stamp = stamp(tk)
         pose.pose.covariance[0] = -1.0 if k % 3 == 0 else 0.01
         rec[names.CAMERA_INFO].append((int(tk * 1e9), info))
         rec[names.TARGET_POSE].append((int(tk * 1e9) + 10_000_000, pose))
+    for fps, p95 in ((11.0, 30.0), (12.5, 21.0)):
+        rec[names.VISION_STATUS].append((0, ros_msgs.diagnostics_msg(
+            'vision', dict(fps=fps, latency_ms_p95=p95, frames_processed=10), stamp(1.0))))
     summary = report.summarize(rec, TOOL_X)
-    assert summary['vision_fps'] == pytest.approx(30.0, rel=1e-6)
-    assert summary['vision_latency_ms_p95'] == pytest.approx(10.0, abs=1e-6)
-    t, seen = report.detections(rec)
+    assert summary['vision_fps'] == 12.5 and summary['vision_latency_ms_p95'] == 21.0
+    t, seen = recording.detections(rec)
     assert seen.sum() == 20
+    _, latency = recording.frame_latencies_ms(rec)
+    assert np.allclose(latency, 10.0)
 
 
 def test_missing_topics_give_nulls_and_no_plots(tmp_path):
@@ -117,23 +162,41 @@ def test_missing_topics_give_nulls_and_no_plots(tmp_path):
     assert write_plots({}, str(tmp_path), TOOL_X) == []
 
 
-def test_report_command_reads_the_mcap_and_writes_summary_and_plots(tmp_path):
+TYPES = {names.GROUND_TRUTH_ODOM: 'nav_msgs/msg/Odometry',
+         names.EE_WRENCH: 'geometry_msgs/msg/WrenchStamped',
+         names.CLOCK: 'rosgraph_msgs/msg/Clock',
+         names.GROUND_TRUTH_TARGET: 'geometry_msgs/msg/PoseStamped',
+         names.CONTROLLER_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+         names.PLANT_STATUS: 'diagnostic_msgs/msg/DiagnosticArray'}
+
+
+def in_time_order(rec):
+    """(log_ns, topic, msg) of every message, in the order a recorder gets them."""
+    return sorted(((log_ns, topic, msg) for topic in TYPES for log_ns, msg in rec[topic]),
+                  key=lambda item: item[0])
+
+
+def open_bag(path, chunk_bytes=1 << 20):
+    bag = McapBag(path, chunk_bytes=chunk_bytes)
+    for topic, type_name in TYPES.items():
+        bag.add_topic(topic if topic.startswith('/') else '/uav/' + topic, type_name)
+    return bag
+
+
+def write(bag, topic, msg, log_ns):
+    bag.write(topic if topic.startswith('/') else '/uav/' + topic, serialize_message(msg),
+              log_ns)
+
+
+def test_report_command_reads_the_mcap_and_writes_summary_and_plots(tmp_path, capsys):
     """Through a real MCAP file: what the recorder writes, the report reads."""
-    from rclpy.serialization import serialize_message
     rec, _ = synthetic_recording(np.full(N, 5.5))
-    bag = McapBag(tmp_path / 'recording.mcap')
-    types = {names.GROUND_TRUTH_ODOM: 'nav_msgs/msg/Odometry',
-             names.EE_WRENCH: 'geometry_msgs/msg/WrenchStamped',
-             names.CLOCK: 'rosgraph_msgs/msg/Clock',
-             names.GROUND_TRUTH_TARGET: 'geometry_msgs/msg/PoseStamped',
-             names.CONTROLLER_STATUS: 'diagnostic_msgs/msg/DiagnosticArray'}
-    for topic, type_name in types.items():
-        absolute = topic if topic.startswith('/') else '/uav/' + topic
-        bag.add_topic(absolute, type_name)
-        for log_ns, msg in rec[topic]:
-            bag.write(absolute, serialize_message(msg), log_ns)
+    bag = open_bag(tmp_path / 'recording.mcap')
+    for log_ns, topic, msg in in_time_order(rec):
+        write(bag, topic, msg, log_ns)
     bag.close()
     assert report.run(argparse.Namespace(run_dir=str(tmp_path))) == 0
+    assert 'incomplete' not in capsys.readouterr().out
     summary = json.loads((tmp_path / 'summary.json').read_text())
     assert summary == report.summarize(rec, TOOL_X)
     assert summary['force_mean_n'] == pytest.approx(5.5)
@@ -142,6 +205,42 @@ def test_report_command_reads_the_mcap_and_writes_summary_and_plots(tmp_path):
     # No actuator or vision topics were recorded: those plots are left out.
     assert not (tmp_path / 'actuators.png').exists()
     assert not (tmp_path / 'vision.png').exists()
+
+
+def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, capsys):
+    """As a killed recorder leaves it: flushed chunks, then a torn one, no summary."""
+    rec, _ = synthetic_recording(np.full(N, 5.5))
+    live = tmp_path / 'live'
+    live.mkdir()
+    bag = open_bag(live / 'recording.mcap', chunk_bytes=1 << 30)   # chunks only by flush
+    messages = in_time_order(rec)
+    cut = next(i for i, (log_ns, _, _) in enumerate(messages) if log_ns > wall_ns(1.8))
+    for log_ns, topic, msg in messages[:cut]:
+        write(bag, topic, msg, log_ns)
+    bag.flush()
+    flushed = (live / 'recording.mcap').stat().st_size
+    for log_ns, topic, msg in messages[cut:]:
+        write(bag, topic, msg, log_ns)
+    bag.flush()
+    run = tmp_path / 'run'
+    run.mkdir()
+    with open(live / 'recording.mcap', 'rb') as src, open(run / 'recording.mcap', 'wb') as dst:
+        data = src.read()
+        dst.write(data[:flushed + 100])     # the second chunk torn, no footer
+    bag.close()
+    assert report.run(argparse.Namespace(run_dir=str(run))) == 0
+    out = capsys.readouterr().out
+    assert 'incomplete (no footer' in out and f'read {cut} messages' in out
+    summary = json.loads((run / 'summary.json').read_text())
+    kept = {topic: [(log_ns, m) for log_ns, m in msgs if log_ns <= wall_ns(1.8)]
+            for topic, msgs in rec.items()}
+    assert summary == report.summarize(kept, TOOL_X)
+    assert summary['force_mean_n'] == pytest.approx(5.5) and summary['success'] is False
+    # The finished file reads completely.
+    shutil.copy(live / 'recording.mcap', run / 'recording.mcap')
+    assert report.run(argparse.Namespace(run_dir=str(run))) == 0
+    assert 'incomplete' not in capsys.readouterr().out
+    assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
 
 
 def _plan_message(tasks):

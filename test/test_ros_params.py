@@ -1,11 +1,18 @@
-"""run_node's SIGINT bookkeeping (no ROS graph needed)."""
+"""Config dataclasses as ROS parameters (descriptors, bad start values, changes at run
+time), run_node's SIGINT bookkeeping and the parent watch, without a ROS graph."""
+import dataclasses
 import os
 import signal
+import subprocess
+import sys
 import time
 
 import pytest
+import rclpy
+from rclpy.parameter import Parameter
 
-from uav_tilt_common.ros_params import note_sigint
+from uav_tilt_common.config import ConfigError, param
+from uav_tilt_common.ros_params import declare_config, note_sigint
 
 
 @pytest.fixture
@@ -32,3 +39,92 @@ def test_a_quiet_previous_handler_stays_quiet(restore_sigint):
     os.kill(os.getpid(), signal.SIGINT)
     time.sleep(0.1)
     assert seen == [signal.SIGINT] and calls == [1]
+
+
+@dataclasses.dataclass
+class Demo:
+    rate_hz: float = param(2.0, lo=0.5, hi=50.0, doc='how often')
+    count: int = param(3, lo=1, hi=5)
+    mode: str = param('a', choices=('a', 'b'))
+    gains_n_m: list = param([1.0, 2.0], lo=0.0, hi=9.0, length=2)
+    contact_force: float = param(5.0, lo=0.0, hi=20.0, unit='N')
+
+
+@pytest.fixture
+def node_of():
+    """node_of(*ros_args) -> an in-process node in a context of its own."""
+    made = []
+
+    def make(*ros_args):
+        context = rclpy.Context()
+        rclpy.init(args=['--ros-args', *ros_args], context=context)
+        node = rclpy.create_node('demo', context=context)
+        made.append((node, context))
+        return node
+    yield make
+    for node, context in made:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_every_field_has_a_descriptor_with_its_range_and_unit(node_of):
+    node = node_of()
+    cfg = declare_config(node, Demo, dynamic=('rate_hz',))
+    assert cfg == Demo()
+    rate = node.describe_parameter('rate_hz')
+    assert rate.description == 'how often; range [0.5, 50.0] Hz'
+    assert (rate.floating_point_range[0].from_value, rate.floating_point_range[0].to_value) \
+        == (0.5, 50.0)
+    assert not rate.read_only
+    count = node.describe_parameter('count')
+    assert (count.integer_range[0].from_value, count.integer_range[0].to_value) == (1, 5)
+    assert count.read_only
+    assert "one of 'a', 'b'" in node.describe_parameter('mode').additional_constraints
+    assert node.describe_parameter('gains_n_m').description == 'range [0.0, 9.0] N/m; 2 elements'
+    assert node.describe_parameter('contact_force').description == 'range [0.0, 20.0] N'
+
+
+@pytest.mark.parametrize('arg, words', [
+    ('rate_hz:=2', ["'rate_hz'", 'floating-point']),
+    ('rate_hz:=99.0', ["'rate_hz'", '99.0', '[0.5, 50.0]']),
+    ('count:=2.0', ["'count'", 'integer']),
+    ('gains_n_m:=[1, 2]', ["'gains_n_m'", 'floating-point']),
+    ('mode:=7', ["'mode'", 'string']),
+])
+def test_a_bad_start_value_is_one_config_error(node_of, arg, words):
+    with pytest.raises(ConfigError) as err:
+        declare_config(node_of('-p', arg), Demo)
+    assert '\n' not in str(err.value)
+    for word in words:
+        assert word in str(err.value)
+
+
+def test_a_change_at_run_time_is_honoured_or_refused_with_a_reason(node_of):
+    node = node_of()
+    seen = []
+    cfg = declare_config(node, Demo, dynamic=('rate_hz',), on_change=seen.append)
+    ok, = node.set_parameters([Parameter('rate_hz', value=10.0)])
+    assert ok.successful and cfg.rate_hz == 10.0 and seen == [{'rate_hz': 10.0}]
+    for value in (99.0, 3):      # out of range, wrong type: refused, nothing changes
+        result, = node.set_parameters([Parameter('rate_hz', value=value)])
+        assert not result.successful and result.reason
+    read_only, = node.set_parameters([Parameter('count', value=4)])
+    assert not read_only.successful and 'read-only' in read_only.reason
+    assert cfg.rate_hz == 10.0 and cfg.count == 3 and len(seen) == 1
+
+
+PARENT_CHECK = ('import os; from uav_tilt_common import parent_watch; '
+                'armed = parent_watch.die_with_parent(); '
+                'print(armed, os.environ.get(parent_watch.PARENT_ENV))')
+
+
+@pytest.mark.parametrize('parent, code, out', [
+    ('mine', 0, 'True None'),       # armed, and not passed on
+    ('1', 128 + signal.SIGTERM, ''),  # not its parent: that one is gone, so it goes too
+    ('', 0, 'False None'),          # not started by launch.sh: left alone
+])
+def test_the_parent_watch(parent, code, out):
+    env = dict(os.environ, UAV_TILT_PARENT_PID=str(os.getpid()) if parent == 'mine' else parent)
+    result = subprocess.run([sys.executable, '-c', PARENT_CHECK], env=env, capture_output=True,
+                            text=True, timeout=60)
+    assert (result.returncode, result.stdout.strip()) == (code, out)

@@ -149,14 +149,15 @@ def test_loss_ignores_objectness_in_ignore_regions_but_not_on_labels():
     torch.manual_seed(0)
     anchors = torch.tensor(DEFAULT_ANCHORS[3])
     loss = YoloLoss(anchors)
-    heads = [torch.randn(1, 3 * 8, 256 // s, 320 // s) for s in STRIDES]
+    strides = STRIDES[:len(anchors)]
+    heads = [torch.randn(1, 3 * 8, 256 // s, 320 // s) for s in strides]
     label = torch.tensor([[0, 1, 60, 60, 30, 30.0]])
     region = torch.tensor([[0, IGNORE_CLASS, 200, 150, 60, 40.0]])
 
     def with_objectness(cells, logit):
         """``heads`` with every anchor's objectness set to ``logit`` where ``cells(stride)``."""
         out = []
-        for h, s in zip(heads, STRIDES):
+        for h, s in zip(heads, strides):
             h = h.clone().view(1, 3, 8, *h.shape[2:])
             h[:, :, 4][:, :, cells(s)] = logit
             out.append(h.view(1, 24, *h.shape[3:]))

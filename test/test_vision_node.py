@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 
 from ros_graph import REPO, start, stop
-from uav_tilt_common import names, ros_msgs, ros_qos
+from uav_tilt_common import names, resources, ros_msgs, ros_qos
 from uav_tilt_common.config import from_dict
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim.camera import CameraConfig
@@ -119,7 +119,7 @@ def test_without_a_model_every_frame_is_no_target_and_bad_input_is_counted(tmp_p
 def hover_scenario(tmp_path):
     """The default scenario with the vehicle hovering (hover_driver holds its height),
     camera 1 m in front of the target."""
-    data = yaml.safe_load(DEFAULT_SCENARIO.read_text())
+    data = yaml.safe_load(resources.default_path(DEFAULT_SCENARIO).read_text())
     cam_xyz = VehicleParams().camera_xyz_m
     data['start_xyz_m'] = [2.5 - 1.0 - cam_xyz[0], 0.0, 1.5 - cam_xyz[2]]
     path = tmp_path / 'hover.yaml'

@@ -15,15 +15,24 @@ class ConfigError(ValueError):
     """A parameter is missing, unknown, of the wrong type or out of range."""
 
 
-def param(default, lo=None, hi=None, choices=None, length=None, items=None,
-          item_length=None):
-    """A config field with its allowed range [lo, hi], choices and fixed list length.
+# Units named by a field's suffix (REP-103 names), longest first; ``param(unit=...)`` wins.
+UNIT_SUFFIXES = (
+    ('_n_s2_per_m2', 'N s^2/m^2'), ('_n_s_per_m', 'N s/m'), ('_m_sqrt_s', 'm/sqrt(s)'),
+    ('_n_per_m', 'N/m'), ('_n_s_m', 'N s/m'), ('_kgm2', 'kg m^2'), ('_mps2', 'm/s^2'),
+    ('_m_s2', 'm/s^2'), ('_rad_s', 'rad/s'), ('_m_s', 'm/s'), ('_n_m', 'N/m'), ('_nm', 'N m'),
+    ('_hz', 'Hz'), ('_deg', 'deg'), ('_rad', 'rad'), ('_kg', 'kg'), ('_px', 'px'),
+    ('_ms', 'ms'), ('_s', 's'), ('_m', 'm'), ('_n', 'N'))
 
-    ``items``: what every element of a list field is: a config dataclass, or ``float`` or
-    ``str`` (which gives an empty default list its type); ``item_length``: every element
-    is itself a list of that many numbers in [lo, hi] (points)."""
+
+def param(default, lo=None, hi=None, choices=None, length=None, items=None, doc=None,
+          unit=None, item_length=None):
+    """A config field with its allowed range [lo, hi], choices, fixed list length, or the
+    config dataclass (or, for a list that may be empty, the scalar type: float, int, str)
+    ``items`` that every element of a list field must be; ``item_length``: every element is
+    itself a list of that many numbers in [lo, hi] (points); ``doc`` says what it is and
+    ``unit`` its unit when the name's suffix does not (see :func:`description`)."""
     meta = {'lo': lo, 'hi': hi, 'choices': choices, 'length': length, 'items': items,
-            'item_length': item_length}
+            'doc': doc, 'unit': unit, 'item_length': item_length}
     if isinstance(default, (list, dict)):
         return dataclasses.field(default_factory=lambda: type(default)(default), metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -65,7 +74,8 @@ def _check_scalar(name, value, default, meta):
     return value
 
 
-def _check(name, value, default, meta):
+def check_field(name, value, default, meta):
+    """``value`` checked against a field's ``default`` (its type) and metadata."""
     if isinstance(default, list):
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"parameter '{name}' = {value!r} must be a list")
@@ -74,14 +84,14 @@ def _check(name, value, default, meta):
             raise ConfigError(
                 f"parameter '{name}' = {list(value)!r} must have {length} elements")
         items = meta.get('items')
-        if dataclasses.is_dataclass(items):
+        if items is not None and dataclasses.is_dataclass(items):
             return [v if isinstance(v, items) else
                     from_dict(items, v, f'{name}[{i}].') for i, v in enumerate(value)]
         if meta.get('item_length') is not None:
             point = {**meta, 'length': meta['item_length'], 'item_length': None,
                      'items': float}
-            return [_check(f'{name}[{i}]', v, [], point) for i, v in enumerate(value)]
-        item_default = default[0] if default else ('' if items is str else 0.0)
+            return [check_field(f'{name}[{i}]', v, [], point) for i, v in enumerate(value)]
+        item_default = default[0] if default else (items() if items else 0.0)
         return [_check_scalar(name, v, item_default, meta) for v in value]
     return _check_scalar(name, value, default, meta)
 
@@ -102,10 +112,47 @@ def from_dict(cls, data, prefix=''):
         if dataclasses.is_dataclass(default):
             kwargs[f.name] = from_dict(type(default), data.get(f.name, {}), name + '.')
         elif f.name in data:
-            kwargs[f.name] = _check(name, data[f.name], default, f.metadata)
+            kwargs[f.name] = check_field(name, data[f.name], default, f.metadata)
         else:
             kwargs[f.name] = default
     return cls(**kwargs)
+
+
+def unit_of(name, meta):
+    """The unit of field ``name``: ``param(unit=...)``, else its suffix's, else ''."""
+    if meta.get('unit') is not None:
+        return meta['unit']
+    leaf = name.rsplit('.', 1)[-1]
+    return next((unit for suffix, unit in UNIT_SUFFIXES if leaf.endswith(suffix)), '')
+
+
+def description(name, meta):
+    """One line for a parameter's ROS descriptor: its doc, then range and unit or choices."""
+    parts = [meta['doc']] if meta.get('doc') else []
+    unit = unit_of(name, meta)
+    lo, hi = meta.get('lo'), meta.get('hi')
+    if lo is not None or hi is not None:
+        bounds = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+        parts.append(f'range {bounds}{" " + unit if unit else ""}')
+    elif unit:
+        parts.append(unit)
+    if meta.get('choices') is not None:
+        parts.append('one of ' + ', '.join(repr(c) for c in meta['choices']))
+    if meta.get('length') is not None:
+        parts.append(f"{meta['length']} elements")
+    return '; '.join(parts)
+
+
+def fields_flat(cls, prefix=''):
+    """Dotted-name -> (default, metadata) of every leaf field of config ``cls``."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        default = _default_of(f)
+        if dataclasses.is_dataclass(default):
+            out.update(fields_flat(type(default), prefix + f.name + '.'))
+        else:
+            out[prefix + f.name] = (default, dict(f.metadata))
+    return out
 
 
 def to_flat(cfg, prefix=''):
@@ -120,22 +167,31 @@ def to_flat(cfg, prefix=''):
     return out
 
 
-def flat_fields(cls, prefix=''):
-    """(dotted name, default, field metadata) of every leaf field of config ``cls``."""
-    out = []
-    for f in dataclasses.fields(cls):
-        default = _default_of(f)
-        if dataclasses.is_dataclass(default):
-            out.extend(flat_fields(type(default), prefix + f.name + '.'))
-        else:
-            out.append((prefix + f.name, default, f.metadata))
-    return out
+def check_value(cls, name, value):
+    """``value`` checked as field ``name`` (dotted) of config ``cls``; ConfigError if bad."""
+    default, meta = fields_flat(cls)[name]
+    return check_field(name, value, default, meta)
 
 
-def load_yaml(cls, path):
-    """Load and validate config ``cls`` from a plain YAML file."""
-    with open(path, encoding='utf-8') as stream:
-        data = yaml.safe_load(stream)
+def replace_flat(cfg, values):
+    """Set dotted-name fields of ``cfg`` in place to already checked ``values``."""
+    for name, value in values.items():
+        *path, leaf = name.split('.')
+        target = cfg
+        for part in path:
+            target = getattr(target, part)
+        setattr(target, leaf, value)
+
+
+def load_yaml(cls, path, parameter='file'):
+    """Load and validate config ``cls`` from a plain YAML file; a file that cannot be read
+    or parsed is one ConfigError line naming ``parameter``."""
+    try:
+        with open(path, encoding='utf-8') as stream:
+            data = yaml.safe_load(stream)
+    except (OSError, yaml.YAMLError) as err:
+        detail = ' '.join(str(err).split())
+        raise ConfigError(f"parameter '{parameter}' = {str(path)!r}: {detail}") from None
     return from_dict(cls, data or {})
 
 

@@ -56,8 +56,9 @@ def _cross_rows(a, b):
 
 def article_wrench_p(thrusts_n, alpha_rad, beta_rad, l1_m, l2_m, k_m):
     """The article's eq. (1)-(2) in frame P: returns (F_y, F_z, tau_x, tau_y, tau_z)."""
-    f1, f2, f3, f4 = np.asarray(thrusts_n, dtype=float)
-    sa, ca, sb, cb = np.sin(alpha_rad), np.cos(alpha_rad), np.sin(beta_rad), np.cos(beta_rad)
+    f1, f2, f3, f4 = np.asarray(thrusts_n, dtype=float).tolist()
+    sa, ca = math.sin(alpha_rad), math.cos(alpha_rad)
+    sb, cb = math.sin(beta_rad), math.cos(beta_rad)
     return np.array([
         (f1 + f4) * sa + (f2 + f3) * sb,
         (f1 + f4) * ca + (f2 + f3) * cb,
@@ -81,7 +82,8 @@ def flu_to_p(v_flu):
 
 def quat_to_matrix(q):
     """Rotation matrix of a unit quaternion (x, y, z, w); cheaper than scipy per call."""
-    x, y, z, w = q
+    # plain floats: arithmetic on numpy scalars costs several times more
+    x, y, z, w = q.tolist() if isinstance(q, np.ndarray) else q
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],

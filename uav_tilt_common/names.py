@@ -41,6 +41,30 @@ SRV_INSPECT = 'inspect'
 SRV_ABORT = 'abort'
 SRV_LAND = 'land'
 
+# The message type of each topic (DESIGN section 3), for those that listen before the
+# publishers exist (the recorder), and the topics published latched (transient local).
+TOPIC_TYPES = {
+    CLOCK: 'rosgraph_msgs/msg/Clock',
+    IMU: 'sensor_msgs/msg/Imu',
+    ODOM: 'nav_msgs/msg/Odometry',
+    EE_WRENCH: 'geometry_msgs/msg/WrenchStamped',
+    ACTUATORS_CMD: 'sensor_msgs/msg/JointState',
+    ACTUATORS_STATE: 'sensor_msgs/msg/JointState',
+    CAMERA_COLOR: 'sensor_msgs/msg/Image',
+    CAMERA_DEPTH: 'sensor_msgs/msg/Image',
+    CAMERA_INFO: 'sensor_msgs/msg/CameraInfo',
+    TARGET_POSE: 'geometry_msgs/msg/PoseWithCovarianceStamped',
+    VISION_DEBUG_IMAGE: 'sensor_msgs/msg/Image',
+    SETPOINT_POSE: 'geometry_msgs/msg/PoseStamped',
+    GROUND_TRUTH_ODOM: 'nav_msgs/msg/Odometry',
+    GROUND_TRUTH_TARGET: 'geometry_msgs/msg/PoseStamped',
+    PLANT_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+    CONTROLLER_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+    CONTROLLER_PLAN: 'std_msgs/msg/String',
+    VISION_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+}
+LATCHED_TOPICS = (GROUND_TRUTH_TARGET, CONTROLLER_PLAN)
+
 
 def ground_truth_target(target_id=''):
     """The ground-truth topic of target ``target_id`` ('' = the scenario's first target)."""

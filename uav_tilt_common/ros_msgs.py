@@ -8,7 +8,7 @@ from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image, Imu, JointState, PointCloud2, PointField
 
-from uav_tilt_common import names
+from uav_tilt_common import cdr, names
 from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_common.state import VehicleState
 from uav_tilt_common.targets import CANDIDATE_FIELDS, candidates_from_array, candidates_to_array
@@ -47,8 +47,7 @@ def odometry_msg(state, stamp, frame_id=names.FRAME_MAP, child=names.FRAME_BASE)
     msg.child_frame_id = child
     _set_xyz(msg.pose.pose.position, state.p_map)
     _set_quat(msg.pose.pose.orientation, state.q_map_base)
-    R = quat_to_matrix(state.q_map_base)
-    _set_xyz(msg.twist.twist.linear, R.T @ state.v_map)
+    _set_xyz(msg.twist.twist.linear, _v_child(state))
     _set_xyz(msg.twist.twist.angular, state.w_base)
     return msg
 
@@ -56,14 +55,60 @@ def odometry_msg(state, stamp, frame_id=names.FRAME_MAP, child=names.FRAME_BASE)
 def state_from_odometry(msg):
     """VehicleState of an Odometry message (map -> base_link, twist in base_link)."""
     pose, twist = msg.pose.pose, msg.twist.twist
-    q = np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z,
-                  pose.orientation.w])
-    v_base = np.array([twist.linear.x, twist.linear.y, twist.linear.z])
-    return VehicleState(
-        from_stamp(msg.header.stamp),
-        np.array([pose.position.x, pose.position.y, pose.position.z]), q,
-        quat_to_matrix(q) @ v_base,
-        np.array([twist.angular.x, twist.angular.y, twist.angular.z]))
+    return _state(from_stamp(msg.header.stamp),
+                  (pose.position.x, pose.position.y, pose.position.z),
+                  (pose.orientation.x, pose.orientation.y, pose.orientation.z,
+                   pose.orientation.w),
+                  (twist.linear.x, twist.linear.y, twist.linear.z),
+                  (twist.angular.x, twist.angular.y, twist.angular.z))
+
+
+def _v_child(state):
+    return quat_to_matrix(state.q_map_base).T @ state.v_map
+
+
+def _state(t_s, p, q, v_child, w_child):
+    q = np.array(q)
+    return VehicleState(t_s, np.array(p), q, quat_to_matrix(q) @ np.array(v_child),
+                        np.array(w_child))
+
+
+# --- serialized (CDR) forms of the 300 Hz messages, see uav_tilt_common.cdr --------------
+def odometry_cdr(state, stamp_ns, frame_id=names.FRAME_MAP, child=names.FRAME_BASE):
+    """Serialized :func:`odometry_msg`."""
+    return cdr.encode_odometry(stamp_ns, frame_id, child, state.p_map.tolist(),
+                               np.asarray(state.q_map_base).tolist(),
+                               _v_child(state).tolist(), np.asarray(state.w_base).tolist())
+
+
+def state_from_odometry_cdr(data):
+    """(frame_id, child_frame_id, VehicleState) of a serialized Odometry."""
+    stamp_ns, frame_id, child, p, q, v, w = cdr.decode_odometry(data)
+    return frame_id, child, _state(stamp_ns * 1e-9, p, q, v, w)
+
+
+def imu_cdr(gyro, accel, q, stamp_ns):
+    """Serialized :func:`imu_msg`."""
+    return cdr.encode_imu(stamp_ns, names.FRAME_BASE, np.asarray(q).tolist(),
+                          np.asarray(gyro).tolist(), np.asarray(accel).tolist())
+
+
+def wrench_cdr(force, torque, stamp_ns, frame_id=names.FRAME_EE):
+    """Serialized :func:`wrench_msg`."""
+    return cdr.encode_wrench(stamp_ns, frame_id, np.asarray(force).tolist(),
+                             np.asarray(torque).tolist())
+
+
+def actuator_cdr(thrusts_n, tilts_rad, stamp_ns):
+    """Serialized :func:`actuator_msg`."""
+    return cdr.encode_joint_state(stamp_ns, '', names.ACTUATOR_NAMES,
+                                  [0.0] * 4 + [float(x) for x in tilts_rad], (),
+                                  [float(x) for x in thrusts_n] + [0.0, 0.0])
+
+
+def clock_cdr(t_s):
+    """Serialized rosgraph_msgs/Clock at ``t_s`` (rounded as :func:`to_stamp`)."""
+    return cdr.encode_clock(int(round(t_s * 1e9)))
 
 
 def imu_msg(gyro, accel, q, stamp):
@@ -195,3 +240,19 @@ def candidates_of_msg(msg):
                          f'point_step {msg.point_step}, {len(msg.data)} bytes')
     dtype = np.dtype('>f4' if msg.is_bigendian else '<f4')
     return candidates_from_array(np.frombuffer(bytes(msg.data), dtype=dtype))
+
+
+def status_value(text):
+    """A value of :func:`diagnostics_msg` decoded: bool, float, or the string itself."""
+    if text in ('True', 'False'):
+        return text == 'True'
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def diagnostics_values(msg):
+    """{key: decoded value} of the first status of a DiagnosticArray ({} if it has none)."""
+    return {kv.key: status_value(kv.value) for kv in msg.status[0].values} if msg.status \
+        else {}

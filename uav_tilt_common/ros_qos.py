@@ -5,8 +5,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 # Control path (imu, odom, ee_wrench, actuators/*): reliable, depth 10.
 CONTROL = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                      history=HistoryPolicy.KEEP_LAST)
-# Camera: published reliable, subscribed best effort depth 1 (REP-2003).
-CAMERA_PUB = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE,
+# Camera: published reliable, subscribed best effort depth 1 (REP-2003). The publisher
+# keeps a third of a second of frames for reliable readers (the recorder) to catch up.
+CAMERA_PUB = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                         history=HistoryPolicy.KEEP_LAST)
 CAMERA_SUB = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                         history=HistoryPolicy.KEEP_LAST)
@@ -15,8 +16,9 @@ STATUS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 # Latched: the last message reaches late joiners (ground_truth/target).
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-# /clock: a reliable publisher serves the best-effort subscription of rclpy's TimeSource.
-CLOCK = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+# /clock: a reliable publisher serves the best-effort subscription of rclpy's TimeSource
+# (which keeps the newest) and a recorder's reliable one (which needs them all).
+CLOCK = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                    history=HistoryPolicy.KEEP_LAST)
 
 
@@ -28,8 +30,9 @@ def quiet_publisher(node, msg_type, topic, qos):
         event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
 
-def quiet_subscription(node, msg_type, topic, callback, qos):
-    """A subscription without QoS-event handlers (see :func:`quiet_publisher`)."""
+def quiet_subscription(node, msg_type, topic, callback, qos, raw=False):
+    """A subscription without QoS-event handlers (see :func:`quiet_publisher`); ``raw``:
+    the callback gets the serialized message (bytes)."""
     return node.create_subscription(
-        msg_type, topic, callback, qos,
+        msg_type, topic, callback, qos, raw=raw,
         event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))

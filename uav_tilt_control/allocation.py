@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from uav_tilt_common.config import param
-from uav_tilt_common.geometry import flu_to_p, rotor_wrench_flu
+from uav_tilt_common.geometry import article_wrench_p
 from uav_tilt_common.vehicle import VehicleParams
 
 # Inputs beyond this are physically meaningless; bounding them keeps the arithmetic finite.
@@ -51,33 +51,36 @@ class Allocator:
 
     def allocate(self, force_flu_xz, torque_flu) -> AllocationResult:
         """Solve eq. (1)-(2) with alpha = beta; saturate as yaw, then roll/pitch, then clip."""
+        # Plain floats: numpy's per-call cost on 2- and 4-vectors is most of a 300 Hz tick.
         v = self.vehicle
         f_lo, f_hi = self.config.min_thrust_n, v.f_max_n
-        force_xz = _sanitize(force_flu_xz, 2)
-        torque = _sanitize(torque_flu, 3)
-        fx, fz = force_xz
+        fx, fz = _sanitize(force_flu_xz, 2)
+        tx, ty, tz = _sanitize(torque_flu, 3)
         f_total, tilt_rad = _total_and_tilt(fx, fz, v.tilt_limit_rad)
         f_total = min(max(float(f_total), 4.0 * f_lo), 4.0 * f_hi)
         s, c = math.sin(tilt_rad), math.cos(tilt_rad)
 
-        tau_p = flu_to_p(torque)
-        base = np.full(4, f_total / 4.0)
-        roll_pitch = self._thrusts_from_torque_p(tau_p[0], tau_p[1], 0.0, s, c)
-        yaw = self._thrusts_from_torque_p(0.0, 0.0, tau_p[2], s, c)
+        # the torque in the article's frame P is (-ty, tx, tz)
+        base = [f_total / 4.0] * 4
+        roll_pitch = self._thrusts_from_torque_p(-ty, tx, 0.0, s, c)
+        yaw = self._thrusts_from_torque_p(0.0, 0.0, tz, s, c)
         rp_scale = _max_feasible_scale(base, roll_pitch, f_lo, f_hi)
-        yaw_scale = _max_feasible_scale(base + rp_scale * roll_pitch, yaw, f_lo, f_hi)
-        thrusts = np.clip(base + rp_scale * roll_pitch + yaw_scale * yaw, f_lo, f_hi)
+        with_rp = [b + rp_scale * d for b, d in zip(base, roll_pitch)]
+        yaw_scale = _max_feasible_scale(with_rp, yaw, f_lo, f_hi)
+        thrusts = [min(max(b + yaw_scale * d, f_lo), f_hi) for b, d in zip(with_rp, yaw)]
 
-        force_got, torque_got = rotor_wrench_flu(thrusts, tilt_rad, tilt_rad, v.l1_m, v.l2_m,
-                                                 v.k_m)
-        force_lost = force_xz - force_got[[0, 2]]
-        torque_lost = torque - torque_got
+        f_y_p, f_z_p, tau_x_p, tau_y_p, tau_z_p = article_wrench_p(
+            thrusts, tilt_rad, tilt_rad, v.l1_m, v.l2_m, v.k_m).tolist()
+        force_lost = (fx - f_y_p, fz - f_z_p)
+        torque_lost = (tx - tau_y_p, ty + tau_x_p, tz - tau_z_p)
+        bound = 1e-9 * (1.0 + f_total)
         saturated = bool(rp_scale < 1.0 or yaw_scale < 1.0
-                         or not (np.abs(force_lost) <= 1e-9 * (1.0 + f_total)).all())
-        return AllocationResult(thrusts, tilt_rad, tilt_rad, saturated, force_lost, torque_lost)
+                         or not (abs(force_lost[0]) <= bound and abs(force_lost[1]) <= bound))
+        return AllocationResult(np.array(thrusts), tilt_rad, tilt_rad, saturated,
+                                np.array(force_lost), np.array(torque_lost))
 
     def _thrusts_from_torque_p(self, tau_x_p, tau_y_p, tau_z_p, s, c):
-        """Thrust increments producing the P-frame torque at tilt (s, c) = (sin, cos)."""
+        """Thrust increments (rotor_1..4) producing the P-frame torque at tilt (s, c)."""
         l1, l2, k = self.vehicle.l1_m, self.vehicle.l2_m, self.vehicle.k_m
         # eq. (2a): front sum minus rear sum; the total stays unchanged.
         front_minus_rear = tau_x_p / (l2 * c)
@@ -89,14 +92,15 @@ class Allocator:
         d1 = (tau_y_p * a22 - a12 * tau_z_p) / det
         d2 = (a11 * tau_z_p - a21 * tau_y_p) / det
         front, rear = front_minus_rear / 2.0, -front_minus_rear / 2.0
-        return 0.5 * np.array([front + d1, rear + d2, rear - d2, front - d1])
+        return [0.5 * (front + d1), 0.5 * (rear + d2), 0.5 * (rear - d2), 0.5 * (front - d1)]
 
 
 def _sanitize(values, n):
-    """Finite, bounded float array of length n (non-finite entries become 0)."""
-    arr = np.asarray(values, dtype=float).reshape(n)
-    arr = np.where(np.isfinite(arr), arr, 0.0)
-    return np.minimum(np.maximum(arr, -_INPUT_BOUND), _INPUT_BOUND)
+    """n finite, bounded floats (non-finite entries become 0)."""
+    out = []
+    for x in np.asarray(values, dtype=float).reshape(n).tolist():
+        out.append(min(max(x, -_INPUT_BOUND), _INPUT_BOUND) if math.isfinite(x) else 0.0)
+    return out
 
 
 def _total_and_tilt(fx, fz, tilt_limit_rad):
@@ -115,7 +119,7 @@ def _total_and_tilt(fx, fz, tilt_limit_rad):
 def _max_feasible_scale(base, delta, lo, hi):
     """Largest s in [0, 1] with lo <= base + s * delta <= hi (base assumed feasible)."""
     scale = 1.0
-    for b, d in zip(base.tolist(), delta.tolist()):
+    for b, d in zip(base, delta):
         if d > 0.0 and b + d > hi:
             scale = min(scale, (hi - b) / d)
         elif d < 0.0 and b + d < lo:

@@ -10,9 +10,9 @@ import math
 import numpy as np
 
 from uav_tilt_common.config import param
-from uav_tilt_common.geometry import cross3, euler_zyx_to_matrix, matrix_to_quat, quat_to_rotvec
+from uav_tilt_common.geometry import (euler_zyx_to_matrix, matrix_to_quat, quat_multiply,
+                                      quat_to_rotvec)
 from uav_tilt_common.state import VehicleState
-from uav_tilt_control import frames
 
 
 @dataclasses.dataclass
@@ -37,10 +37,15 @@ def attitude_setpoint(force_map, yaw_rad, pitch_rad=0.0, roll_limit_rad=0.6):
     body frame. With |roll| at its limit the remaining y_FLU part is dropped.
     """
     force = np.asarray(force_map, dtype=float)
-    f_yp = euler_zyx_to_matrix(yaw_rad, pitch_rad, 0.0).T @ force
+    fx, fy, fz = force.tolist()
+    # f_yp = (Rz(yaw) Ry(pitch))^T force; only its y and z are needed
+    cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
+    cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
+    f_yp_y = -sy * fx + cy * fy
+    f_yp_z = cy * sp * fx + sy * sp * fy + cp * fz
     # Rx(roll)^T f_yp has y = cos*f_y + sin*f_z = 0; the |f_z| choice keeps roll small (and
     # defined) when the force points down, where the rotors cannot follow anyway.
-    roll_rad = math.atan2(-f_yp[1], abs(f_yp[2]))
+    roll_rad = math.atan2(-f_yp_y, abs(f_yp_z))
     roll_rad = min(max(roll_rad, -roll_limit_rad), roll_limit_rad)
     R_map_base_d = euler_zyx_to_matrix(yaw_rad, pitch_rad, roll_rad)
     f_body = R_map_base_d.T @ force
@@ -57,15 +62,13 @@ class AttitudePid:
     def __init__(self, inertia_kgm2, config: AttitudeConfig = None):
         self.config = config or AttitudeConfig()
         self.inertia = np.asarray(inertia_kgm2, dtype=float)
-        # the per-axis gains as arrays once, not per tick (the configuration is fixed)
+        # Per-axis gains as float lists once: the tick runs on plain floats, as numpy's
+        # per-call cost on 3-vectors would be most of it.
         cfg = self.config
-        self._att_p = np.asarray(cfg.att_p, dtype=float)
-        self._rate_limit = np.asarray(cfg.rate_limit_rad_s, dtype=float)
-        self._rate_p = np.asarray(cfg.rate_p, dtype=float)
-        self._rate_i = np.asarray(cfg.rate_i, dtype=float)
-        self._rate_d = np.asarray(cfg.rate_d, dtype=float)
-        self._i_limit = np.asarray(cfg.rate_i_limit, dtype=float)
-        self._accel_limit = np.asarray(cfg.accel_limit, dtype=float)
+        self._inertia = self.inertia.tolist()
+        self._axes = list(zip(*(list(map(float, g)) for g in (
+            cfg.att_p, cfg.rate_limit_rad_s, cfg.rate_p, cfg.rate_i, cfg.rate_d,
+            cfg.rate_i_limit, cfg.accel_limit))))
         self.reset()
 
     def reset(self):
@@ -76,29 +79,39 @@ class AttitudePid:
 
     def update(self, R_map_base_d, state: VehicleState, dt_s):
         """One control tick; returns the body torque (FLU, N m)."""
-        cfg = self.config
-        R_map_base = frames.quat_matrix(state.q_map_base)
-        # Error rotation expressed in the body: R_base_base_d as a rotation vector.
-        err_rotvec = quat_to_rotvec(matrix_to_quat(R_map_base.T @ R_map_base_d))
-        limit = self._rate_limit
-        rate_sp = np.minimum(np.maximum(self._att_p * err_rotvec, -limit), limit)
+        x, y, z, w = np.asarray(state.q_map_base, dtype=float).tolist()
+        norm = math.sqrt(x * x + y * y + z * z + w * w)
+        # Error rotation expressed in the body, R_base_base_d = R_map_base^T R_map_base_d,
+        # as a rotation vector: q_map_base^-1 * q_map_base_d.
+        err_rotvec = quat_to_rotvec(quat_multiply(
+            (-x / norm, -y / norm, -z / norm, w / norm), matrix_to_quat(R_map_base_d))).tolist()
+        rate = np.asarray(state.w_base, dtype=float).tolist()
+        prev, d_rate, integral = self._rate_prev, self._d_rate.tolist(), self.integral.tolist()
+        if prev is not None:
+            blend = 1.0 - math.exp(-2.0 * math.pi * self.config.d_cutoff_hz * dt_s)
+            d_rate = [d + blend * ((r - r0) / dt_s - d) for d, r, r0 in zip(d_rate, rate, prev)]
+        self._rate_prev = rate
 
-        rate = np.asarray(state.w_base, dtype=float)
-        if self._rate_prev is not None:
-            raw = (rate - self._rate_prev) / dt_s
-            blend = 1.0 - math.exp(-2.0 * math.pi * cfg.d_cutoff_hz * dt_s)
-            self._d_rate += blend * (raw - self._d_rate)
-        self._rate_prev = rate.copy()
-
-        rate_err = rate_sp - rate
-        accel = self._rate_p * rate_err + self.integral - self._rate_d * self._d_rate
-        accel_limit = self._accel_limit
-        saturated = np.abs(accel) >= accel_limit
-        # Integrate only where the output is free, or where integrating unwinds it.
-        unwinding = np.sign(rate_err) != np.sign(accel)
-        grow = np.where(~saturated | unwinding, self._rate_i * rate_err * dt_s, 0.0)
-        i_limit = self._i_limit
-        self.integral = np.minimum(np.maximum(self.integral + grow, -i_limit), i_limit)
-        accel = np.minimum(np.maximum(accel, -accel_limit), accel_limit)
+        accel = []
+        for i, (att_p, rate_limit, rate_p, rate_i, rate_d, i_limit, accel_limit) in enumerate(
+                self._axes):
+            rate_sp = min(max(att_p * err_rotvec[i], -rate_limit), rate_limit)
+            rate_err = rate_sp - rate[i]
+            a = rate_p * rate_err + integral[i] - rate_d * d_rate[i]
+            # Integrate only where the output is free, or where integrating unwinds it.
+            if abs(a) < accel_limit or _sign(rate_err) != _sign(a):
+                integral[i] = min(max(integral[i] + rate_i * rate_err * dt_s, -i_limit),
+                                  i_limit)
+            accel.append(min(max(a, -accel_limit), accel_limit))
+        self._d_rate, self.integral = np.array(d_rate), np.array(integral)
         # Gyroscopic term so the gains act on a decoupled double integrator.
-        return self.inertia * accel + cross3(rate, self.inertia * rate)
+        j0, j1, j2 = self._inertia
+        w0, w1, w2 = rate
+        h0, h1, h2 = j0 * w0, j1 * w1, j2 * w2
+        return np.array([j0 * accel[0] + (w1 * h2 - w2 * h1),
+                         j1 * accel[1] + (w2 * h0 - w0 * h2),
+                         j2 * accel[2] + (w0 * h1 - w1 * h0)])
+
+
+def _sign(x):
+    return (x > 0.0) - (x < 0.0)

@@ -8,6 +8,7 @@ reference's feed-forward acts) and the attitude is the last odometry attitude in
 with the gyro.
 """
 import dataclasses
+import math
 
 import numpy as np
 
@@ -33,10 +34,14 @@ class ControllerConfig:
     'inspect' runs the one-touch plan (``contact_force`` for mission.hold_time_s), 'plan'
     the plan in ``plan_file`` (uav_tilt_control.plan), validated against ``site``."""
 
-    target_source: str = param('vision', choices=TARGET_SOURCES)
-    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0)  # N, along -normal
-    autostart: str = param('', choices=('', 'inspect', 'plan'))
-    plan_file: str = param('')
+    target_source: str = param('vision', choices=TARGET_SOURCES,
+                               doc='where the target comes from (ground_truth: evaluation)')
+    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0, unit='N',
+                                 doc='push along the surface normal during HOLD')
+    autostart: str = param('', choices=('', 'inspect', 'plan'),
+                           doc="mission started by itself: 'inspect' the one-touch plan, "
+                               "'plan' the plan in plan_file")
+    plan_file: str = param('', doc='inspection plan (YAML) for autostart plan')
     flight: FlightCoreConfig = nested(FlightCoreConfig)
     mission: MissionConfig = nested(MissionConfig)
     estimator: TargetEstimatorConfig = nested(TargetEstimatorConfig)
@@ -166,7 +171,7 @@ class ControllerCore:
         ``accel``: the IMU's specific force (base_link, m/s^2), for the disturbance observer.
         """
         gyro = np.asarray(gyro, dtype=float)
-        if self._odom is None or not np.all(np.isfinite(gyro)):
+        if self._odom is None or not all(map(math.isfinite, gyro.tolist())):
             return self._idle_command(), self._status(t_s, np.inf, {'input_fault': True}, None)
         odom_age_s = t_s - self._odom.t_s
         truth = self._ground_truths.get(self._truth_id)
@@ -234,22 +239,25 @@ class ControllerCore:
         return ActuatorCommand(np.zeros(4), 0.0, 0.0)
 
     def _bounded(self, command):
-        values = command.as_array()
-        if not np.all(np.isfinite(values)):
+        thrusts = command.thrusts_n.tolist()
+        if not all(map(math.isfinite, thrusts + [command.alpha_rad, command.beta_rad])):
             return self.flight.safe_command()
-        command.thrusts_n = np.clip(command.thrusts_n, 0.0, self.vehicle.f_max_n)
+        f_max = self.vehicle.f_max_n
+        command.thrusts_n = np.array([min(max(f, 0.0), f_max) for f in thrusts])
         return command
 
     def _status(self, t_s, odom_age_s, diagnostics, target):
-        status = dict(self.mission.status)
+        status = self.mission.status
         status.update(
             t_s=float(t_s),
             target_source=self.config.target_source,
             target_valid=bool(target is not None and target.valid),
             odom_age_s=float(odom_age_s),
             f_normal_n=self.f_normal_n,
+            contact_force_n=self.mission.contact_force_n,
             saturated=bool(diagnostics.get('saturated', False)),
             input_fault=bool(diagnostics.get('input_fault', False)),
         )
-        status.update({f'target_{k}': v for k, v in self.estimator.counters.items()})
+        for key, value in self.estimator.counters.items():
+            status['target_' + key] = value
         return status

@@ -83,9 +83,10 @@ class FlightCore:
             # away the damping that friction gives a sideways slip of the tip.
             moment = cross3(self._tip_flu, R_map_base.T @ self.impedance.f_tangential_map)
             torque_flu = torque_flu - np.array([0.0, moment[1], 0.0])
-        result = self.allocator.allocate(f_body[[0, 2]], torque_flu)
-        made_xz = f_body[[0, 2]] - result.force_given_up_n
-        self.disturbance.commanded(R_map_base @ np.array([made_xz[0], 0.0, made_xz[1]]))
+        result = self.allocator.allocate((f_body[0], f_body[2]), torque_flu)
+        given_up_x, given_up_z = result.force_given_up_n
+        made_x, made_z = f_body[0] - given_up_x, f_body[2] - given_up_z
+        self.disturbance.commanded(R_map_base @ np.array([made_x, 0.0, made_z]))
         command = ActuatorCommand(result.thrusts_n, result.alpha_rad, result.beta_rad)
         diagnostics = {
             'input_fault': False,
@@ -102,11 +103,13 @@ class FlightCore:
 
 
 def _inputs_finite(state, setpoint, f_contact_map, dt_s):
-    arrays = [state.p_map, state.q_map_base, state.v_map, state.w_base, f_contact_map,
-              setpoint.R_map_t, setpoint.origin_map, setpoint.lambda_d_t, setpoint.dlambda_d_t,
-              setpoint.ddlambda_d_t, [setpoint.yaw_rad, setpoint.pitch_rad, dt_s]]
     try:
-        flat = np.concatenate([np.asarray(a, dtype=float).ravel() for a in arrays])
+        # one concatenate with the cast, not one array per input (this runs every tick)
+        flat = np.concatenate(
+            (state.p_map, state.q_map_base, state.v_map, state.w_base, f_contact_map,
+             np.ravel(setpoint.R_map_t), setpoint.origin_map, setpoint.lambda_d_t,
+             setpoint.dlambda_d_t, setpoint.ddlambda_d_t,
+             (setpoint.yaw_rad, setpoint.pitch_rad, dt_s)), dtype=float)
         q = np.asarray(state.q_map_base, dtype=float)
     except (TypeError, ValueError):
         return False

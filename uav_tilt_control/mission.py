@@ -991,9 +991,15 @@ def _distance_to_polyline(p, vertices):
 
 
 def _finite_state(state):
-    return state is not None and bool(np.isfinite(
-        np.concatenate((state.p_map, state.q_map_base, state.v_map))).all())
+    return state is not None and all(map(math.isfinite, np.concatenate(
+        (state.p_map, state.q_map_base, state.v_map)).tolist()))
 
 
 def _yaw_of(state):
-    return matrix_to_euler_zyx(frames.quat_matrix(state.q_map_base))[0]
+    # the yaw of matrix_to_euler_zyx from the two matrix entries it needs (every tick)
+    x, y, z, w = np.asarray(state.q_map_base, dtype=float).tolist()
+    n2 = x * x + y * y + z * z + w * w
+    m00, m10 = 1.0 - 2.0 * (y * y + z * z) / n2, 2.0 * (x * y + z * w) / n2
+    if math.hypot(m00, m10) < 1e-12:
+        return matrix_to_euler_zyx(frames.quat_matrix(state.q_map_base))[0]
+    return math.atan2(m10, m00)

@@ -8,6 +8,7 @@ the position of a static point and an exponential average on the normal.
 import bisect
 import collections
 import dataclasses
+import math
 import typing
 
 import numpy as np
@@ -87,7 +88,7 @@ class TargetEstimator:
             return
         p_map = np.array(state.p_map, dtype=float)
         q = np.asarray(state.q_map_base, dtype=float)
-        if not (np.isfinite(p_map).all() and np.isfinite(q).all()):
+        if not all(map(math.isfinite, p_map.tolist() + q.tolist())):
             return
         # a unit quaternion: scipy's from_quat normalised it, the slerp needs it
         self._history.append((float(state.t_s), p_map, frames.unit(q)))
@@ -175,8 +176,10 @@ class TargetEstimator:
         if n_map.shape == (3, 3):
             n_map = n_map[:, 2]
         p_map = np.asarray(p_poi_map, dtype=float)
-        if not (np.isfinite(stamp_s) and np.all(np.isfinite(p_map))
-                and np.all(np.isfinite(n_map)) and np.linalg.norm(n_map) > 1e-9):
+        # called every tick in this mode: plain-float checks (numpy's cost more per call)
+        n = n_map.tolist()
+        if not (all(map(math.isfinite, [stamp_s, *p_map.tolist(), *n]))
+                and math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) > 1e-9):
             self.counters['rejected_nonfinite'] += 1
             return False
         self._reset(stamp_s, p_map, frames.unit(n_map), np.zeros((3, 3)))

@@ -14,8 +14,10 @@ class RotorBank:
 
     def step(self, command_n):
         """Advance one physics step towards ``command_n``; returns the thrusts [N]."""
-        target = np.clip(command_n, 0.0, self.f_max_n)
-        self.thrusts_n += self._gain * (target - self.thrusts_n)
+        # plain floats: called at the physics rate, where numpy's per-call cost dominates
+        gain, f_max = self._gain, self.f_max_n
+        self.thrusts_n[:] = [f + gain * (min(max(c, 0.0), f_max) - f) for f, c in
+                             zip(self.thrusts_n.tolist(), np.asarray(command_n).tolist())]
         return self.thrusts_n
 
 

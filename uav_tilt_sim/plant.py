@@ -22,6 +22,12 @@ from uav_tilt_sim.world import build_world
 
 GRAVITY_MAP = np.array([0.0, 0.0, -GRAVITY])
 SERVO_TORQUE_NM = 5.0
+# Random stream of the gusts, beside the sensors' (uav_tilt_sim.sensors.RNG_STREAMS).
+RNG_WIND = 0
+# PyBullet's position control of the two arm joints
+_SERVO_FORCES = [SERVO_TORQUE_NM] * 2
+_SERVO_KP = [0.8] * 2
+_SERVO_KD = [1.0] * 2
 
 
 @dataclasses.dataclass
@@ -96,8 +102,11 @@ class Plant:
         self.rotors = RotorBank(v.thrust_tau_s, v.f_max_n, self.dt_physics)
         self.servos = [Servo(v.servo_bandwidth_hz, v.servo_rate_rad_s, v.tilt_limit_rad,
                              self.dt_physics) for _ in range(2)]
-        self.rng = np.random.default_rng(scenario.seed)
-        self.sensors = SensorModel(scenario.noise, self.rng)
+        # One stream per source of randomness, so that one's draws never shift another's:
+        # the same seed gives the same wind whether the camera renders or not.
+        self._wind_rng = np.random.default_rng([scenario.seed, RNG_WIND])
+        self.sensors = SensorModel(scenario.noise, scenario.seed)
+        self._sensed = None         # (tick, TickSensors) of the last read
         self._gust = np.zeros(3)
         self._gust_decay = np.exp(-self.dt_physics / scenario.wind.gust_tau_s)
         self.tick = 0
@@ -134,28 +143,36 @@ class Plant:
             self.command = command
         c = self.command
         v = self.vehicle
+        client, body = self.client, self.body
         # Thrust directions follow the arms; over one 3.3 ms tick they move < 0.02 rad.
         A = rotor_wrench_matrix(*self._tilts(), v.l1_m, v.l2_m, v.k_m)
+        cx, cy, cz = self._com_offset.tolist()
         for _ in range(self.config.substeps):
-            wrench_b = A @ self.rotors.step(c.thrusts_n)
+            fx, fy, fz, tx, ty, tz = (A @ self.rotors.step(c.thrusts_n)).tolist()
             (a_ref, a_rate), (b_ref, b_rate) = (self.servos[0].step(c.alpha_rad),
                                                 self.servos[1].step(c.beta_rad))
             p.setJointMotorControlArray(
-                self.body, self._arm_joints, p.POSITION_CONTROL, targetPositions=[a_ref, b_ref],
-                targetVelocities=[a_rate, b_rate], forces=[SERVO_TORQUE_NM] * 2,
-                positionGains=[0.8] * 2, velocityGains=[1.0] * 2, physicsClientId=self.client)
-            pos, quat = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-            vel, _ = p.getBaseVelocity(self.body, physicsClientId=self.client)
-            R = quat_to_matrix(quat)
-            force_map = (R @ wrench_b[:3] + self._air_force(np.asarray(vel))
-                         + self.external_force_map)
+                body, self._arm_joints, p.POSITION_CONTROL, targetPositions=[a_ref, b_ref],
+                targetVelocities=[a_rate, b_rate], forces=_SERVO_FORCES,
+                positionGains=_SERVO_KP, velocityGains=_SERVO_KD, physicsClientId=client)
+            pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)
+            vel, _ = p.getBaseVelocity(body, physicsClientId=client)
+            # plain floats for the 3-vectors: numpy's per-call cost is most of this loop
+            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = quat_to_matrix(quat).tolist()
+            ax, ay, az = (self._air_force(np.asarray(vel)) + self.external_force_map).tolist()
+            force_map = [r00 * fx + r01 * fy + r02 * fz + ax, r10 * fx + r11 * fy + r12 * fz + ay,
+                         r20 * fx + r21 * fy + r22 * fz + az]
             # base_link's origin is the rotor centroid; PyBullet's base frame is the hub CoM.
-            origin_map = np.asarray(pos) - R @ self._com_offset
-            p.applyExternalForce(self.body, -1, force_map.tolist(), origin_map.tolist(),
-                                 p.WORLD_FRAME, physicsClientId=self.client)
-            p.applyExternalTorque(self.body, -1, (R @ wrench_b[3:]).tolist(), p.WORLD_FRAME,
-                                  physicsClientId=self.client)
-            p.stepSimulation(physicsClientId=self.client)
+            origin_map = [pos[0] - (r00 * cx + r01 * cy + r02 * cz),
+                          pos[1] - (r10 * cx + r11 * cy + r12 * cz),
+                          pos[2] - (r20 * cx + r21 * cy + r22 * cz)]
+            p.applyExternalForce(body, -1, force_map, origin_map, p.WORLD_FRAME,
+                                 physicsClientId=client)
+            p.applyExternalTorque(body, -1, [r00 * tx + r01 * ty + r02 * tz,
+                                             r10 * tx + r11 * ty + r12 * tz,
+                                             r20 * tx + r21 * ty + r22 * tz], p.WORLD_FRAME,
+                                  physicsClientId=client)
+            p.stepSimulation(physicsClientId=client)
         self.tick += 1
         self._truth = None
 
@@ -167,6 +184,7 @@ class Plant:
             servo.angle_rad, servo.rate_rad_s = angle, 0.0
             p.resetJointState(self.body, joint, angle, 0.0, physicsClientId=self.client)
         self._truth = None
+        self._sensed = None
 
     def _air_force(self, vel_map):
         """Quadratic drag against the air moving at mean wind + gust."""
@@ -174,7 +192,8 @@ class Plant:
         std = wind.gust_std_m_s
         if std > 0.0:
             a = self._gust_decay
-            self._gust = a * self._gust + std * np.sqrt(1 - a * a) * self.rng.standard_normal(3)
+            self._gust = (a * self._gust
+                          + std * np.sqrt(1 - a * a) * self._wind_rng.standard_normal(3))
         rel = np.asarray(wind.mean_m_s) + self._gust - vel_map
         return wind.drag_n_s2_per_m2 * np.linalg.norm(rel) * rel
 
@@ -208,9 +227,12 @@ class Plant:
         """Contact force and torque (about the tip) on the tool, in ee_link (FLU axes)."""
         force = np.zeros(3)
         torque = np.zeros(3)
+        contacts = p.getContactPoints(bodyA=self.body, linkIndexA=vehicle_body.TOOL,
+                                      physicsClientId=self.client)
+        if not contacts:
+            return force, torque
         tip = self.tool_tip_map()
-        for c in p.getContactPoints(bodyA=self.body, linkIndexA=vehicle_body.TOOL,
-                                    physicsClientId=self.client):
+        for c in contacts:
             normal, dir1, dir2 = np.asarray(c[7]), np.asarray(c[11]), np.asarray(c[13])
             # The normal is reported on bodyA (the tool); the lateral friction along
             # directions built on the pair's own normal, which is this one or its opposite
@@ -224,7 +246,14 @@ class Plant:
         return R.T @ force, R.T @ torque
 
     def read_sensors(self):
-        """Noisy sensor set of the current tick (IMU, odometry, F/T, actuators)."""
+        """Noisy sensor set of the current tick (IMU, odometry, F/T, actuators); reading
+        again in the same tick gives the same set (a sensor samples once a tick)."""
+        if self._sensed is not None and self._sensed[0] == self.tick:
+            return self._sensed[1]
+        self._sensed = (self.tick, self._sample_sensors())
+        return self._sensed[1]
+
+    def _sample_sensors(self):
         truth = self.state()
         accel_map = (truth.v_map - self._prev_v_map) / self.dt_tick
         self._prev_v_map = truth.v_map.copy()

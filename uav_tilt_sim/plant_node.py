@@ -1,17 +1,23 @@
 """plant_node: the PyBullet plant on ROS 2 (DESIGN sections 3-4).
 
-Owns time: each 300 Hz tick it publishes /clock and the control-path sensors stamped t_k.
+Owns time: each 300 Hz tick it publishes the control-path sensors and /clock stamped t_k,
+then the camera frame when one is due (so that rendering overlaps the controller's tick).
 In lockstep it steps past t_k only once `actuators/cmd` stamped t_k has arrived, or after
 `lockstep_timeout_s` of wall time, when it applies the failsafe and free-runs until
 commands come back. In realtime, sim time follows the wall clock and late commands are
-counted, never waited for.
+counted, never waited for; when the host cannot keep up, the ticks it is behind by more
+than MAX_CATCH_UP are dropped (sim time slips), and plant/status reports the achieved
+real-time factor, the late commands and the dropped ticks, with a warning at most every
+REALTIME_WARN_PERIOD_S. The 300 Hz messages travel serialized (uav_tilt_common.cdr).
 """
 import dataclasses
 import functools
+import json
+import math
 import time
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
@@ -19,10 +25,11 @@ from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
 
-from uav_tilt_common import names, ros_msgs, ros_qos
+from uav_tilt_common import cdr, names, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.state import ActuatorCommand
 from uav_tilt_sim.command_check import check_command
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
@@ -30,21 +37,40 @@ from uav_tilt_sim.scenario import load_scenario
 
 # Before the first command the current tick is re-sent this often (late-joining controllers).
 RESEND_PERIOD_S = 0.25
-# Free-running ticks one timer callback may step to catch up with the wall clock.
+# Free-running ticks one timer callback may step to catch up with the wall clock; a larger
+# backlog is dropped: a burst of them would come too fast for the controller to answer.
 MAX_CATCH_UP = 10
+# The longest hold_until_recorded keeps the first tick.
+RECORDER_WAIT_S = 30.0
+# Realtime: a warning when the host does not keep up, at most this often.
+REALTIME_WARN_PERIOD_S = 5.0
+# Realtime: achieved real-time factor below this share of the target counts as not keeping up.
+KEEP_UP_SHARE = 0.98
 
 
 @dataclasses.dataclass
 class PlantNodeConfig(PlantCoreConfig):
     """Parameters of plant_node (DESIGN section 7 names are stable)."""
 
-    scenario_file: str = param('')
-    mode: str = param('lockstep', choices=('lockstep', 'realtime'))
-    rtf: float = param(0.0, lo=0.0, hi=1000.0)
-    lockstep_timeout_s: float = param(0.5, lo=0.005, hi=60.0)
-    timeout_failsafe: str = param('cut_thrust', choices=('cut_thrust', 'hold_last'))
-    camera_enabled: bool = param(True)
-    status_rate_hz: float = param(2.0, lo=0.1, hi=50.0)
+    scenario_file: str = param('', doc='scenario YAML; empty: config/scenarios/default.yaml')
+    mode: str = param('lockstep', choices=('lockstep', 'realtime'),
+                      doc='lockstep: wait for each tick\'s command; realtime: follow the clock')
+    rtf: float = param(0.0, lo=0.0, hi=1000.0, doc='target real-time factor, 0 = as fast '
+                       'as possible')
+    lockstep_timeout_s: float = param(0.5, lo=0.005, hi=60.0,
+                                      doc='wall time to wait for a command before failsafe')
+    timeout_failsafe: str = param('cut_thrust', choices=('cut_thrust', 'hold_last'),
+                                  doc='what a lockstep timeout applies')
+    camera_enabled: bool = param(True, doc='render and publish the RGB-D camera')
+    status_rate_hz: float = param(2.0, lo=0.1, hi=50.0, doc='plant/status rate (wall clock)')
+    hold_until_recorded: bool = param(
+        False, doc='lockstep: keep the first tick until every plant topic has a matched '
+        'subscription (a recorder of all of them), at most 30 s of wall time')
+    summary_file: str = param('', doc="one JSON line with the run's timing, written at exit")
+
+
+# Parameters a `ros2 param set` changes while the plant runs; the others are read-only.
+DYNAMIC = ('rtf', 'lockstep_timeout_s', 'timeout_failsafe', 'camera_enabled')
 
 
 class PlantNode(Node):
@@ -52,7 +78,7 @@ class PlantNode(Node):
 
     def __init__(self):
         super().__init__('plant')
-        self.cfg = declare_config(self, PlantNodeConfig)
+        self.cfg = declare_config(self, PlantNodeConfig, DYNAMIC, self._on_parameters)
         scenario = load_scenario(self.cfg.scenario_file or None)
         self.plant = Plant(self.cfg, scenario, warn=self.get_logger().warn)
         self.camera_every = max(1, int(round(self.cfg.control_hz / self.cfg.camera.rate_hz)))
@@ -75,11 +101,12 @@ class PlantNode(Node):
                                               ros_qos.CAMERA_PUB)
         self.pub_status = self.create_publisher(DiagnosticArray, names.PLANT_STATUS,
                                                 ros_qos.STATUS)
-        ros_qos.quiet_subscription(self, JointState, names.ACTUATORS_CMD, self.on_command, q)
+        ros_qos.quiet_subscription(self, JointState, names.ACTUATORS_CMD, self.on_command, q,
+                                   raw=True)
 
         self.rejects = RejectCounter()
         self.stats = dict(lockstep_waits=0, lockstep_timeouts=0, late_commands=0,
-                          clamped_commands=0, commands=0)
+                          clamped_commands=0, commands=0, dropped_ticks=0)
         self.waiting = False            # lockstep: waiting for the command of this tick
         self.synced = False             # lockstep: a command has arrived since the last timeout
         self.ever_commanded = False
@@ -87,12 +114,17 @@ class PlantNode(Node):
         self.wall_start = time.monotonic()
         self.sim_start = 0.0
         self.last_status = (time.monotonic(), 0.0)
+        self.wall_t0 = time.monotonic()
+        self.holding = self.cfg.hold_until_recorded and self.cfg.mode == 'lockstep'
+        self.held_command = None        # the first command, while holding
         self.in_contact = False
+        # run statistics from the first command (lockstep) or the first tick (realtime)
+        self.run_start = None           # (wall, sim)
+        self.last_warning = (time.monotonic(), 0.0, 0, 0)  # (wall, sim, late, dropped)
 
         self._publish_target()
         self._publish_tick()
-        period = self.plant.dt_tick / (self.cfg.rtf if self.cfg.rtf > 0 else 1.0)
-        self.tick_timer = self.create_timer(period, self.on_free_tick)
+        self.tick_timer = self.create_timer(self._free_tick_period_s(), self.on_free_tick)
         if self.cfg.mode == 'lockstep':
             self.tick_timer.cancel()
             self.create_timer(0.05, self.on_watchdog)
@@ -101,20 +133,38 @@ class PlantNode(Node):
             f'plant up: mode={self.cfg.mode} rtf={self.cfg.rtf} '
             f'scenario={self.cfg.scenario_file or "default"} camera={self.cfg.camera_enabled}')
 
+    def _free_tick_period_s(self):
+        return self.plant.dt_tick / (self.cfg.rtf if self.cfg.rtf > 0 else 1.0)
+
+    def _on_parameters(self, changed):
+        """A new rtf paces from now on: sim and wall time restart their common origin."""
+        if 'rtf' in changed:
+            self.wall_start, self.sim_start = time.monotonic(), self.plant.t_s
+            self.tick_timer.timer_period_ns = int(self._free_tick_period_s() * 1e9)
+
     # --- inputs -------------------------------------------------------------------------
-    def on_command(self, msg):
-        """Validate a command; in lockstep, the command of the current tick steps the plant."""
-        result = check_command(msg.name, msg.effort, msg.position, self.plant.vehicle)
+    def on_command(self, data):
+        """Validate a command (serialized JointState); in lockstep, the command of the
+        current tick steps the plant."""
+        try:
+            stamp_ns, _, joint_names, position, _, effort = cdr.decode_joint_state(data)
+        except ValueError as exc:
+            self._reject_command('malformed', f'malformed message ({exc})')
+            return
+        result = check_command(joint_names, effort, position, self.plant.vehicle)
         if result.command is None:
-            if self.rejects.reject(result.kind):
-                self.get_logger().warn(f'rejected actuator command ({result.detail}); '
-                                       f'{self.rejects.total} rejected so far')
+            self._reject_command(result.kind, result.detail)
+            return
+        if not self.ever_commanded and not self._recorded():
+            self.held_command = data    # applied by the watchdog once the recorder listens
             return
         self.stats['commands'] += 1
         self.stats['clamped_commands'] += int(result.clamped)
         self.plant.command = result.command
+        if not self.ever_commanded and self.cfg.mode == 'lockstep':
+            self.run_start = (time.monotonic(), self.plant.t_s)
         self.ever_commanded = True
-        stamp_tick = round(ros_msgs.from_stamp(msg.header.stamp) / self.plant.dt_tick)
+        stamp_tick = round(stamp_ns * 1e-9 / self.plant.dt_tick)
         if self.cfg.mode == 'realtime':
             # The answer to tick k normally lands during tick k+1; older is late.
             if stamp_tick < self.plant.tick - 1:
@@ -131,8 +181,34 @@ class PlantNode(Node):
         self.waiting = False
         self._advance()
 
+    def _recorded(self):
+        """hold_until_recorded: whether every topic a tick publishes has a matched
+        subscription, or the wait is over."""
+        if not self.holding:
+            return True
+        pubs = [self.pub_clock, self.pub_imu, self.pub_odom, self.pub_wrench, self.pub_act,
+                self.pub_gt_odom]
+        if self.cfg.camera_enabled:
+            pubs += [self.pub_rgb, self.pub_depth, self.pub_info]
+        if all(pub.get_subscription_count() for pub in pubs):
+            return True
+        if time.monotonic() - self.wall_t0 < RECORDER_WAIT_S:
+            return False
+        self.get_logger().warn(f'hold_until_recorded: not every topic has a subscriber after '
+                               f'{RECORDER_WAIT_S:.0f} s; starting anyway')
+        self.holding = False
+        return True
+
+    def _reject_command(self, kind, detail):
+        if self.rejects.reject(kind):
+            self.get_logger().warn(f'rejected actuator command ({detail}); '
+                                   f'{self.rejects.total} rejected so far')
+
     def on_watchdog(self):
         """Lockstep wall-clock guard: re-send before the first command, time out after."""
+        if self.held_command is not None and self._recorded():
+            msg, self.held_command = self.held_command, None
+            self.on_command(msg)
         if not self.waiting:
             return
         waited = time.monotonic() - self.wait_started
@@ -156,16 +232,26 @@ class PlantNode(Node):
     def on_free_tick(self):
         """Realtime mode, or lockstep after a timeout: sim time follows the wall clock.
 
-        Steps as many ticks as are due (at most MAX_CATCH_UP per call), so late timer
-        callbacks on a busy machine do not slow simulated time down.
+        Steps the ticks that are due, as many as MAX_CATCH_UP per call, so late timer
+        callbacks on a busy machine do not slow simulated time down; a longer backlog is
+        dropped (counted) by moving the wall-clock anchor.
         """
         if self.cfg.mode == 'lockstep':
             self._apply_failsafe()
+        elif self.run_start is None:
+            # the clock starts with the first tick, not with the node's start-up
+            self.run_start = (time.monotonic(), self.plant.t_s)
+            self.wall_start, self.sim_start = self.run_start
         rate = self.cfg.rtf if self.cfg.rtf > 0 else 1.0
-        due = self.sim_start + (time.monotonic() - self.wall_start) * rate
-        for _ in range(MAX_CATCH_UP):
-            if self.plant.t_s + self.plant.dt_tick > due + 1e-9:
-                break
+        dt = self.plant.dt_tick
+        now = time.monotonic()
+        due = self.sim_start + (now - self.wall_start) * rate
+        backlog = math.floor((due - self.plant.t_s) / dt + 1e-9)
+        if backlog > MAX_CATCH_UP:
+            self.stats['dropped_ticks'] += backlog - MAX_CATCH_UP
+            self.sim_start, self.wall_start = self.plant.t_s, now - MAX_CATCH_UP * dt / rate
+            backlog = MAX_CATCH_UP
+        for _ in range(backlog):
             self.plant.step()
             self._publish_tick()
 
@@ -186,32 +272,32 @@ class PlantNode(Node):
         self._publish_tick()
 
     def _publish_tick(self):
-        self.pub_clock.publish(Clock(clock=ros_msgs.to_stamp(self.plant.t_s)))
         self._publish_sensors()
-        if self.cfg.camera_enabled and self.plant.tick % self.camera_every == 0:
-            self._publish_camera()
+        self.pub_clock.publish(ros_msgs.clock_cdr(self.plant.t_s))
         if self.cfg.mode == 'lockstep' and self.synced:
             self.stats['lockstep_waits'] += 1
         self.waiting = self.cfg.mode == 'lockstep' and (self.synced or not self.ever_commanded)
         self.wait_started = time.monotonic()
+        if self.cfg.camera_enabled and self.plant.tick % self.camera_every == 0:
+            rgb, depth, _ = self.plant.render()
+            self._publish_frame(self.plant.t_s, rgb, depth)
 
     def _publish_sensors(self):
         s = self.plant.read_sensors()
-        stamp = ros_msgs.to_stamp(s.t_s)
+        stamp_ns = round(s.t_s * 1e9)
         # The controller runs on imu, so everything it reads goes out before it.
-        self.pub_odom.publish(ros_msgs.odometry_msg(s.odom, stamp))
-        self.pub_wrench.publish(ros_msgs.wrench_msg(s.ee_force_n, s.ee_torque_nm, stamp))
+        self.pub_odom.publish(ros_msgs.odometry_cdr(s.odom, stamp_ns))
+        self.pub_wrench.publish(ros_msgs.wrench_cdr(s.ee_force_n, s.ee_torque_nm, stamp_ns))
         # Monitoring-only topics cost the 300 Hz loop nothing when nobody listens.
         if self.pub_act.get_subscription_count():
-            self.pub_act.publish(ros_msgs.actuator_msg(s.thrusts_n, s.tilts_rad, stamp))
+            self.pub_act.publish(ros_msgs.actuator_cdr(s.thrusts_n, s.tilts_rad, stamp_ns))
         if self.pub_gt_odom.get_subscription_count():
-            self.pub_gt_odom.publish(ros_msgs.odometry_msg(self.plant.state(), stamp))
-        self.pub_imu.publish(ros_msgs.imu_msg(s.gyro_rad_s, s.accel_m_s2, s.q_imu, stamp))
+            self.pub_gt_odom.publish(ros_msgs.odometry_cdr(self.plant.state(), stamp_ns))
+        self.pub_imu.publish(ros_msgs.imu_cdr(s.gyro_rad_s, s.accel_m_s2, s.q_imu, stamp_ns))
         self.in_contact = s.in_contact
 
-    def _publish_camera(self):
-        rgb, depth, _ = self.plant.render()
-        stamp = ros_msgs.to_stamp(self.plant.t_s)
+    def _publish_frame(self, t_s, rgb, depth):
+        stamp = ros_msgs.to_stamp(t_s)
         self.pub_info.publish(ros_msgs.camera_info_msg(self.cfg.camera, stamp))
         self.pub_rgb.publish(ros_msgs.image_msg(rgb, stamp))
         self.pub_depth.publish(ros_msgs.image_msg(depth, stamp))
@@ -231,27 +317,72 @@ class PlantNode(Node):
             self.pub_gt_targets[target_id].publish(msg)
 
     def on_status(self):
-        """plant/status: real-time factor, lockstep counters, rejected commands, contact."""
+        """plant/status: sim and wall time, real-time factor, lockstep counters, rejected
+        commands, contact."""
         now = time.monotonic()
         last_wall, last_sim = self.last_status
         rtf = (self.plant.t_s - last_sim) / max(now - last_wall, 1e-9)
         self.last_status = (now, self.plant.t_s)
         values = dict(mode=self.cfg.mode, sim_time_s=self.plant.t_s, tick=self.plant.tick,
-                      rtf=rtf, synced=self.synced, rejected_commands=self.rejects.total,
-                      in_contact=getattr(self, 'in_contact', False), **self.stats)
+                      wall_time_s=now - self.wall_t0, rtf=rtf, rtf_mean=self._run_rtf(now),
+                      target_rtf=self.cfg.rtf, synced=self.synced,
+                      rejected_commands=self.rejects.total, in_contact=self.in_contact,
+                      **self.stats)
         values.update({f'rejected_{k}': v for k, v in self.rejects.counts.items()})
+        level, message = DiagnosticStatus.OK, 'ok'
+        if self.cfg.mode == 'realtime':
+            lagging = self._realtime_warning(now)
+            if lagging:
+                level, message = DiagnosticStatus.WARN, lagging
         self.pub_status.publish(ros_msgs.diagnostics_msg(
-            'plant', values, ros_msgs.to_stamp(self.plant.t_s)))
+            'plant', values, ros_msgs.to_stamp(self.plant.t_s), level, message))
+
+    def _run_rtf(self, now):
+        """Simulated over wall seconds since the run started (None before)."""
+        if self.run_start is None or now <= self.run_start[0]:
+            return None
+        return (self.plant.t_s - self.run_start[1]) / (now - self.run_start[0])
+
+    def _realtime_warning(self, now):
+        """'' while the host keeps up; else the reason, logged at most every
+        REALTIME_WARN_PERIOD_S, over the time since the last warning."""
+        wall, sim, late, dropped = self.last_warning
+        if now - wall < REALTIME_WARN_PERIOD_S:
+            return ''
+        self.last_warning = (now, self.plant.t_s, self.stats['late_commands'],
+                             self.stats['dropped_ticks'])
+        target = self.cfg.rtf if self.cfg.rtf > 0 else 1.0
+        rtf = (self.plant.t_s - sim) / (now - wall)
+        new_late = self.stats['late_commands'] - late
+        new_dropped = self.stats['dropped_ticks'] - dropped
+        if rtf >= KEEP_UP_SHARE * target and not new_late and not new_dropped:
+            return ''
+        reason = (f'not keeping up with the wall clock: sim time at {rtf:.2f}x '
+                  f'(target {target:g}x), {new_late} late commands and {new_dropped} dropped '
+                  f'ticks in the last {now - wall:.0f} s')
+        self.get_logger().warn(reason)
+        return reason
+
+    def summary(self):
+        """The run's timing and counters (written to ``summary_file`` at exit)."""
+        now = time.monotonic()
+        return dict(mode=self.cfg.mode, sim_time_s=self.plant.t_s,
+                    wall_time_s=None if self.run_start is None else now - self.run_start[0],
+                    rtf=self._run_rtf(now), target_rtf=self.cfg.rtf,
+                    rejected_commands=self.rejects.total, **self.stats)
 
     def destroy_node(self):
-        """Release the physics server with the node."""
+        """Write the summary and release the physics server with the node."""
+        if self.cfg.summary_file:
+            with open(self.cfg.summary_file, 'w', encoding='utf-8') as stream:
+                stream.write(json.dumps(self.summary()) + '\n')
         self.plant.close()
         return super().destroy_node()
 
 
 def main(args=None):
     """Entry point of the plant_node executable."""
-    return run_node(PlantNode, args)
+    return run_node(PlantNode, args, spin=spin_events)
 
 
 if __name__ == '__main__':

@@ -1,13 +1,13 @@
 """Scenario files (DESIGN section 5): the world, disturbances, noise, model mismatch, seed."""
 import dataclasses
-import pathlib
 import re
 
+from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError, load_yaml, nested, param
 from uav_tilt_common.targets import OBJECT_CLASSES
 
-DEFAULT_SCENARIO = pathlib.Path(__file__).resolve().parent.parent / 'config' / 'scenarios' \
-    / 'default.yaml'
+# The scenario of an empty ``scenario_file``, relative to the package's files.
+DEFAULT_SCENARIO = 'config/scenarios/default.yaml'
 
 
 @dataclasses.dataclass
@@ -90,9 +90,12 @@ class Scenario:
     texture_seed: int = param(-1, lo=-1, hi=2**31 - 1)  # -1: same as seed
 
 
-def load_scenario(path=None):
-    """Load and validate a scenario YAML (empty path: the default scenario)."""
-    return check_scenario(load_yaml(Scenario, path or DEFAULT_SCENARIO))
+def load_scenario(path=None, parameter='scenario_file'):
+    """Load and validate a scenario YAML (empty path: the default scenario); a relative path
+    as :func:`resources.resolve` finds it. ConfigError names ``parameter`` when the file is
+    missing or unreadable."""
+    return check_scenario(load_yaml(Scenario, resources.resolve(path or DEFAULT_SCENARIO,
+                                                                parameter), parameter))
 
 
 def check_scenario(scenario):

@@ -1,55 +1,65 @@
-"""Sensor noise models (IMU, mocap-like odometry, F/T, depth), seeded by the scenario."""
+"""Sensor noise models (IMU, mocap-like odometry, F/T, depth), seeded by the scenario.
+
+Each sensor draws from its own random stream, ``default_rng([seed, stream])``, so how often
+one is read (the camera renders or not, ticks re-sent before lockstep sync) never changes
+another's noise, nor the wind (stream 0, uav_tilt_sim.plant).
+"""
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.state import VehicleState
 
+RNG_STREAMS = {'imu': 1, 'odometry': 2, 'ft': 3, 'depth': 4}
+
 
 class SensorModel:
     """Adds zero-mean Gaussian noise of the scenario's standard deviations."""
 
-    def __init__(self, noise, rng):
+    def __init__(self, noise, seed):
         self.noise = noise
-        self.rng = rng
+        self.rngs = {name: np.random.default_rng([seed, stream])
+                     for name, stream in RNG_STREAMS.items()}
 
-    def _add(self, value, std):
+    def _add(self, sensor, value, std):
         value = np.asarray(value, dtype=float)
         if std <= 0.0:
             return value.copy()
-        return value + std * self.rng.standard_normal(value.shape)
+        return value + std * self.rngs[sensor].standard_normal(value.shape)
 
     def gyro(self, w_base):
         """Angular rate in base_link."""
-        return self._add(w_base, self.noise.imu_gyro_rad_s)
+        return self._add('imu', w_base, self.noise.imu_gyro_rad_s)
 
     def accel(self, specific_force_base):
         """Specific force in base_link."""
-        return self._add(specific_force_base, self.noise.imu_accel_m_s2)
+        return self._add('imu', specific_force_base, self.noise.imu_accel_m_s2)
 
     def force(self, force):
         """F/T force."""
-        return self._add(force, self.noise.ft_force_n)
+        return self._add('ft', force, self.noise.ft_force_n)
 
     def torque(self, torque):
         """F/T torque."""
-        return self._add(torque, self.noise.ft_torque_nm)
+        return self._add('ft', torque, self.noise.ft_torque_nm)
 
     def odometry(self, truth):
-        """Mocap-like pose and velocity of base_link."""
+        """Mocap-like pose and velocity of base_link (its angular rate as noisy as the
+        gyro's, from the odometry's own stream)."""
         q = truth.q_map_base
         if self.noise.odom_att_rad > 0.0:
-            delta = Rotation.from_rotvec(self._add(np.zeros(3), self.noise.odom_att_rad))
+            delta = Rotation.from_rotvec(self._add('odometry', np.zeros(3),
+                                                   self.noise.odom_att_rad))
             q = (Rotation.from_quat(q) * delta).as_quat()
-        return VehicleState(truth.t_s, self._add(truth.p_map, self.noise.odom_pos_m),
+        return VehicleState(truth.t_s, self._add('odometry', truth.p_map, self.noise.odom_pos_m),
                             np.asarray(q, dtype=float),
-                            self._add(truth.v_map, self.noise.odom_vel_m_s),
-                            self.gyro(truth.w_base))
+                            self._add('odometry', truth.v_map, self.noise.odom_vel_m_s),
+                            self._add('odometry', truth.w_base, self.noise.imu_gyro_rad_s))
 
     def depth(self, depth_m):
         """Metric depth image with noise growing with range squared (stereo-like)."""
         std = self.noise.depth_m
         if std <= 0.0:
             return depth_m
-        noisy = depth_m + (std * depth_m ** 2 * self.rng.standard_normal(depth_m.shape)
-                           ).astype(np.float32)
+        noisy = depth_m + (std * depth_m ** 2 * self.rngs['depth'].standard_normal(
+            depth_m.shape)).astype(np.float32)
         return np.where(np.isfinite(depth_m), noisy, depth_m)

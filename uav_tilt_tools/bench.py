@@ -1,4 +1,4 @@
-"""`uav-tilt bench sim|control|vision`: one JSON object on stdout (DESIGN section 7)."""
+"""`uav-tilt bench sim|control|vision|graph`: one JSON object on stdout (DESIGN section 7)."""
 import json
 import os
 
@@ -18,8 +18,13 @@ def _vision(seconds):
     return bench_vision(seconds)
 
 
+def _graph(seconds):
+    from uav_tilt_tools.bench_graph import bench_graph
+    return bench_graph(seconds)
+
+
 # Imported on demand: the sim bench need not load torch or the controller.
-BENCHES = {'sim': _sim, 'control': _control, 'vision': _vision}
+BENCHES = {'sim': _sim, 'control': _control, 'vision': _vision, 'graph': _graph}
 
 
 def register(sub):
@@ -27,7 +32,8 @@ def register(sub):
     parser = sub.add_parser('bench', help='speed measurements, one JSON object on stdout')
     parser.add_argument('what', choices=sorted(BENCHES))
     parser.add_argument('--seconds', type=float, default=None,
-                        help='length of each measurement (default: 30 s control, else 10 s)')
+                        help='length of each measurement (default: 30 s control, 20 s of '
+                             'simulated time graph, else 10 s)')
     parser.set_defaults(func=run)
 
 
@@ -36,7 +42,7 @@ def run(args):
     # Benches start node processes: keep them local and away from a running system.
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
-    defaults = {'sim': 10.0, 'control': 30.0, 'vision': 10.0}
+    defaults = {'sim': 10.0, 'control': 30.0, 'vision': 10.0, 'graph': 20.0}
     seconds = args.seconds if args.seconds is not None else defaults[args.what]
     print(json.dumps(BENCHES[args.what](seconds)))
     return 0

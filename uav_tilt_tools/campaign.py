@@ -142,7 +142,11 @@ def wilson_interval(successes, n, z=1.96):
     p = successes / n
     centre = p + z * z / (2 * n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return (centre - half) / (1 + z * z / n), (centre + half) / (1 + z * z / n)
+    # all or none: the bound on that side is exactly 1 or 0 (rounding would put the rate
+    # itself outside its interval)
+    low = 0.0 if successes == 0 else (centre - half) / (1 + z * z / n)
+    high = 1.0 if successes == n else (centre + half) / (1 + z * z / n)
+    return low, high
 
 
 def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=DURATION_S,

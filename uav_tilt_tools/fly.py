@@ -38,8 +38,9 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
         duration_s = DURATION_S * len(plan_of(config))
     plant_config, vision = PlantCoreConfig(), None
     if target_source == 'vision':
-        from uav_tilt_vision.vision_node import REPO, VisionNodeConfig
-        vision = camera_vision(plant_config, model_path or REPO / VisionNodeConfig().model_path)
+        from uav_tilt_common.resources import locate
+        from uav_tilt_vision.vision_node import VisionNodeConfig
+        vision = camera_vision(plant_config, model_path or locate(VisionNodeConfig().model_path))
     start = time.perf_counter()
     result = run_mission(scenario, config, duration_s=duration_s, plant_config=plant_config,
                          vision=vision)

@@ -14,7 +14,8 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.mission import Mode
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
-from uav_tilt_tools.task_metrics import task_results
+from uav_tilt_tools.mission_metrics import mission_summary, push_along_normal
+from uav_tilt_tools.task_metrics import task_results, with_tasks
 
 
 class Flight:
@@ -63,11 +64,10 @@ class Flight:
                                          sensors.accel_m_s2)
         self.tick_s.append(time.perf_counter() - start)
         truth = plant.state()
-        force_map = self._true_force_map(sensors.in_contact)
         self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
-                             force_map=force_map,
-                             push_n=float(force_map @ self.plant.world.R_map_wall[:, 2]),
+                             push_n=self._true_push_n(sensors.in_contact),
+                             ft_force_ee_n=sensors.ee_force_n,
                              task_index=self.status.get('task_index', -1), command=command))
         plant.step(command)
 
@@ -83,61 +83,46 @@ class Flight:
         """Release the physics server."""
         self.plant.close()
 
-    def _true_force_map(self, in_contact):
-        """Contact force on the vehicle [N, map] from the plant's truth; along the wall's
-        outward normal it is the push (positive pushing).
-
-        ``in_contact`` (from read_sensors, which saw the true contact force) spares the
-        contact query on free-flight ticks, where the force is below 1e-6 N.
-        """
-        if not in_contact:
-            return np.zeros(3)
-        force_ee, _ = self.plant.contact_wrench_ee()
-        return quat_to_matrix(self.plant.state().q_map_base) @ force_ee
-
 
 def mission_result(flight):
-    """Summary of a plan's run (DESIGN section 7 ``summary.json`` names): ``tasks``, one
-    entry per task (uav_tilt_tools.task_metrics), the first touch's results at the top
-    level as for an inspection, the mode history, where a failsafe fired and the first
-    touch's peak push."""
+    """Summary of a plan's run: :func:`mission_metrics.mission_summary` of the log (the
+    F/T reading and the truth of each tick) with the plan's ``tasks``
+    (:func:`task_metrics.with_tasks`), the failsafe reason and where it fired, the history
+    of modes, the first touch's true peak push, the target confirmed for the approach and
+    the mean tool tip over HOLD."""
     log = flight.log
-    modes = [entry['mode'] for entry in log]
-    history = [(log[0]['t_s'], modes[0])] + [
-        (log[i]['t_s'], modes[i]) for i in range(1, len(log)) if modes[i] != modes[i - 1]]
-    push = np.array([entry['push_n'] for entry in log])
+    modes = [(entry['t_s'], entry['mode']) for entry in log]
+    history = [modes[0]] + [modes[i] for i in range(1, len(modes))
+                            if modes[i][1] != modes[i - 1][1]]
     world = flight.plant.world
+    push = ([push_along_normal(quat_to_matrix(e['q_map_base']), e['ft_force_ee_n'],
+                               world.R_map_target) for e in log]
+            if world.R_map_target is not None else [])
+    normal = world.R_map_target[:, 2] if world.R_map_target is not None else None
+    t_log = [e['t_s'] for e in log]
+    result = mission_summary(modes, flight.status, t_log, push, t_log,
+                             [e['tip_map'] for e in log], world.target_poi_map, normal)
     reason = flight.status.get('failsafe_reason', '')
     events = flight.core.mission.events
     fired = [e for e in events if reason and e['reason'] == reason]
     approached = [e['target_map'] for e in events if e['mode'] == Mode.APPROACH.value
                   and e['previous'] == Mode.SEARCH.value]
+    hold = [e['tip_map'] for e in log if e['mode'] == Mode.HOLD.value]
     truths = {'': (world.target_poi_map, world.R_map_target), **world.targets} \
         if world.target_poi_map is not None else {}
-    tasks = task_results(flight.core.plan_report()['tasks'],
-                         [e['t_s'] for e in log], [e['tip_map'] for e in log],
-                         [e['force_map'] for e in log], truths, world.R_map_wall[:, 2])
-    result = dict(success=bool(flight.status.get('success', False)),
-                  contact_lost=int(flight.status.get('contact_lost', 0)),
-                  failsafe_reason=reason,
+    force_map = [quat_to_matrix(e['q_map_base']) @ e['ft_force_ee_n'] for e in log]
+    tasks = task_results(flight.core.plan_report()['tasks'], t_log,
+                         [e['tip_map'] for e in log], force_map, truths, world.R_map_wall[:, 2])
+    result.update(failsafe_reason=reason,
                   failsafe_where=({'mode': fired[-1]['previous'], 'phase': fired[-1]['phase']}
                                   if fired else None),
-                  max_force_n=float(push.max()) if push.size else 0.0,
-                  first_touch_peak_n=_first_touch_peak(log, push),
+                  first_touch_peak_n=_first_touch_peak(log, np.array([e['push_n']
+                                                                      for e in log])),
                   mode_history=[(float(t), m) for t, m in history],
-                  poi_error_m=None, poi_error_max_m=None, force_mean_n=None,
-                  force_rms_error_n=None, hold_time_s=0.0, hold_tip_map=None,
-                  sim_time_s=float(flight.t_s), ticks=len(log),
+                  hold_tip_map=np.mean(hold, axis=0).tolist() if hold else None,
                   confirmed_target_map=approached[0] if approached else None,
-                  tasks=tasks)
-    landed = [t for t, m in history[1:] if m == Mode.IDLE.value]
-    result['mission_time_s'] = float(landed[-1] if landed else log[-1]['t_s'])
-    touches = [task for task in tasks if task['kind'] == 'touch']
-    if touches:
-        result.update({key: touches[0][key] for key in (
-            'poi_error_m', 'poi_error_max_m', 'force_mean_n', 'force_rms_error_n',
-            'hold_time_s', 'hold_tip_map')})
-    return result
+                  sim_time_s=float(flight.t_s), ticks=len(log))
+    return with_tasks(result, tasks)
 
 
 def _first_touch_peak(log, push, window_s=0.25):

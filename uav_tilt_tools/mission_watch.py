@@ -7,7 +7,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import ExternalShutdownException
 
-from uav_tilt_common import names, ros_qos
+from uav_tilt_common import names, parent_watch, ros_qos
 
 # Modes in which no mission is under way.
 GROUNDED = ('IDLE', 'WAITING_FOR_SENSORS')
@@ -32,6 +32,7 @@ class MissionWatch:
 
 def main(args=None):
     """Exit 0 when the mission succeeded, 1 when it failed, 130 when interrupted first."""
+    parent_watch.die_with_parent()
     rclpy.init(args=args)
     node = rclpy.create_node('mission_watch')
     watch = MissionWatch()

@@ -1,9 +1,16 @@
 """recorder_node: records every topic of its namespace, and /clock, into one MCAP file.
 
-Topics are discovered periodically and subscribed raw (serialized CDR, no decoding), with a
-QoS matched to their publishers (:func:`topic_graph.subscription_qos`). The file is
-completed on shutdown (SIGINT/SIGTERM) and flushed chunk by chunk while recording, so even
-a killed recorder leaves its flushed chunks readable.
+The contract's topics (:data:`names.TOPIC_TYPES`) are subscribed at start, so the recorder
+listens before the plant's first tick when it starts first, as scripts/launch.sh starts it;
+other topics are discovered periodically. All are subscribed raw (serialized CDR, no
+decoding), with a QoS matched to their publishers as rosbag2 does
+(:func:`topic_graph.subscription_qos`, resubscribed should a publisher offer less):
+reliable publishers get a reliable subscription (a best-effort one loses frames under load).
+A message's log time is when the recorder got it by the node's clock: sim time (/clock)
+with ``use_sim_time``, as scripts/launch.sh starts it (messages that come before the first
+/clock get the time of that first /clock), else the wall clock. The file is completed on
+shutdown (SIGINT/SIGTERM), its size reported, and flushed chunk by chunk while recording,
+so even a killed recorder leaves its flushed chunks readable.
 """
 import dataclasses
 import os
@@ -30,12 +37,14 @@ QUEUE_DEPTH = 100
 class RecorderConfig:
     """Parameters of recorder_node."""
 
-    output: str = param(DEFAULT_FILE)   # file, or folder that gets recording.mcap
-    # Comma-separated topics not to record. The debug image is drawn only for subscribers,
-    # so recording it would load the vision node it observes.
-    exclude: str = param(names.VISION_DEBUG_IMAGE)
-    discovery_period_s: float = param(0.5, lo=0.05, hi=10.0)
-    flush_period_s: float = param(1.0, lo=0.1, hi=60.0)
+    output: str = param(DEFAULT_FILE, doc='MCAP file, or folder that gets recording.mcap')
+    # The debug image is drawn only for subscribers, so recording it would load the vision
+    # node it observes.
+    exclude: str = param(names.VISION_DEBUG_IMAGE, doc='comma-separated topics not to record')
+    discovery_period_s: float = param(0.5, lo=0.05, hi=10.0,
+                                      doc='how often new topics are looked for (wall clock)')
+    flush_period_s: float = param(1.0, lo=0.1, hi=60.0,
+                                  doc='how often the chunk in progress is written out')
 
 
 def output_path(output):
@@ -57,15 +66,24 @@ class RecorderNode(Node):
         self.prefix = namespace.rstrip('/') + '/'
         self.exclude = {topic_graph.resolve(t.strip(), namespace)
                         for t in self.cfg.exclude.split(',') if t.strip()}
-        self.bag = McapBag(output_path(self.cfg.output))
-        self.subscriptions_by_topic = {}
+        self.subscriptions_by_topic = {}     # topic -> (subscription, QoS)
         self.skipped = set()
+        self.sim_time = bool(self.get_parameter('use_sim_time').value)
+        self.pending = []       # (topic, data) received before the first /clock
+        # The contract's topics are subscribed right after the file is made (launch.sh
+        # waits for the file), so before the plant's first tick.
+        self.bag = McapBag(output_path(self.cfg.output))
+        for relative, type_name in names.TOPIC_TYPES.items():
+            topic = topic_graph.resolve(relative, namespace)
+            if self.wanted(topic):
+                self.subscribe(topic, type_name, topic_graph.contract_qos(relative, QUEUE_DEPTH))
         # Wall clock: discovery and flushing go on when sim time stalls.
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(self.cfg.discovery_period_s, self.discover, clock=wall)
         self.create_timer(self.cfg.flush_period_s, self.bag.flush, clock=wall)
         self.get_logger().info(f'recording {self.prefix}* and {names.CLOCK} '
-                               f'to {self.bag.path}')
+                               f'to {self.bag.path}, log time: '
+                               f'{"sim time" if self.sim_time else "wall clock"}')
         self.discover()
 
     def wanted(self, topic):
@@ -74,37 +92,72 @@ class RecorderNode(Node):
                 and topic not in self.exclude)
 
     def discover(self):
-        """Subscribe to every new wanted, published topic whose type is installed."""
+        """Subscribe to every new wanted, published topic whose type is installed, and
+        again to one whose publishers now offer a QoS the subscription does not match."""
         for topic, type_name in topic_graph.topic_types(self).items():
             # Wait for a publisher: its QoS decides ours (a latched topic needs
             # transient local before its one message goes by).
-            if topic in self.subscriptions_by_topic or topic in self.skipped \
-                    or not self.wanted(topic) or not self.count_publishers(topic):
+            if topic in self.skipped or not self.wanted(topic) \
+                    or not self.count_publishers(topic):
                 continue
-            try:
-                msg_type = topic_graph.message_class(type_name)
+            qos = topic_graph.subscription_qos(self, topic, QUEUE_DEPTH)
+            current = self.subscriptions_by_topic.get(topic)
+            if current is None or (current[1].reliability, current[1].durability) != (
+                    qos.reliability, qos.durability):
+                self.subscribe(topic, type_name, qos)
+
+    def subscribe(self, topic, type_name, qos):
+        """(Re)subscribe ``topic`` with ``qos``; a type that is not installed is skipped."""
+        old = self.subscriptions_by_topic.pop(topic, None)
+        try:
+            msg_type = topic_graph.message_class(type_name)
+            if old is None:
                 self.bag.add_topic(topic, type_name)
-            except (ImportError, AttributeError, LookupError) as err:
-                self.skipped.add(topic)
-                self.get_logger().warn(f'not recording {topic} [{type_name}]: {err}')
-                continue
-            qos = topic_graph.subscription_qos(self, topic, type_name, QUEUE_DEPTH)
-            self.subscriptions_by_topic[topic] = self.create_subscription(
-                msg_type, topic, self._writer(topic), qos, raw=True,
-                event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
-            self.get_logger().info(f'recording {topic} [{type_name}]')
+        except (ImportError, AttributeError, LookupError) as err:
+            self.skipped.add(topic)
+            self.get_logger().warn(f'not recording {topic} [{type_name}]: {err}')
+            return
+        if old is not None:
+            self.destroy_subscription(old[0])
+        subscription = self.create_subscription(
+            msg_type, topic, self._writer(topic), qos, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        self.subscriptions_by_topic[topic] = (subscription, qos)
+        self.get_logger().info(
+            f'recording {topic} [{type_name}] {qos.reliability.name.lower()} '
+            f'{qos.durability.name.lower()}')
 
     def _writer(self, topic):
         def callback(data):
-            self.bag.write(topic, data, time.time_ns())
+            self.write(topic, data)
         return callback
 
+    def write(self, topic, data):
+        """Append one message at the node clock's time (held until sim time is known)."""
+        if not self.sim_time:
+            self.bag.write(topic, data, time.time_ns())
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        if now_ns == 0:         # no /clock yet
+            self.pending.append((topic, data))
+            return
+        self._write_pending(now_ns)
+        self.bag.write(topic, data, now_ns)
+
+    def _write_pending(self, log_time_ns):
+        for topic, data in self.pending:
+            self.bag.write(topic, data, log_time_ns)
+        self.pending.clear()
+
     def destroy_node(self):
-        """Complete the file with the node."""
+        """Complete the file with the node and say what it holds."""
+        self._write_pending(0)
         self.bag.close()
         # After shutdown /rosout is gone: say it on stderr.
         counts = ', '.join(f'{t}: {n}' for t, n in sorted(self.bag.counts.items()))
-        print(f'[recorder] wrote {self.bag.path} ({counts})', file=sys.stderr, flush=True)
+        size_mb = os.path.getsize(self.bag.path) / 1e6
+        print(f'[recorder] wrote {self.bag.path} ({size_mb:.1f} MB; {counts})',
+              file=sys.stderr, flush=True)
         return super().destroy_node()
 
 

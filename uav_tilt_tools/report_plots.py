@@ -1,4 +1,4 @@
-"""PNG plots of a recording (see :mod:`uav_tilt_tools.report`); a plot whose data is missing
+"""PNG plots of a recording (:mod:`uav_tilt_tools.recording`); a plot whose data is missing
 is left out."""
 import os
 
@@ -6,7 +6,8 @@ import matplotlib
 import numpy as np
 
 from uav_tilt_common import names
-from uav_tilt_tools import report, task_plots
+from uav_tilt_tools import recording, task_plots
+from uav_tilt_tools.mission_metrics import HOLD, runs_of_mode
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (after the headless backend is chosen)
@@ -16,8 +17,8 @@ WALL_HALF_LENGTH_M = 1.5
 
 def write_plots(rec, out_dir, tool_tip_x_m):
     """Write every plot the recording has data for; returns the paths written."""
-    ctrl = report.statuses(rec, names.CONTROLLER_STATUS)
-    hold = report.runs_of_mode(ctrl, report.HOLD)
+    ctrl = recording.statuses(rec, names.CONTROLLER_STATUS)
+    hold = runs_of_mode(recording.modes(ctrl), HOLD)
     plots = (('trajectory.png', lambda: plot_trajectory(rec, tool_tip_x_m)),
              ('force.png', lambda: plot_force(rec, ctrl, hold)),
              ('actuators.png', lambda: plot_actuators(rec)),
@@ -43,12 +44,12 @@ def _shade(ax, runs):
 
 def plot_trajectory(rec, tool_tip_x_m):
     """Top (x-y) and side (x-z) views of the vehicle and tool tip, the wall and the POI."""
-    poses = report.vehicle_poses(rec)
+    poses = recording.vehicle_poses(rec)
     if not poses:
         return None
     body = np.array([p for p, _ in poses.values()])
-    _, tips = report.tool_tips(rec, tool_tip_x_m)
-    target = report.target_pose(rec)
+    _, tips = recording.tool_tips(rec, tool_tip_x_m)
+    target = recording.target_pose(rec)
     fig, axes = plt.subplots(1, 2, figsize=(11, 5))
     for ax, (a, b), title in ((axes[0], (0, 1), 'top view'), (axes[1], (0, 2), 'side view')):
         ax.plot(body[:, a], body[:, b], label='vehicle')
@@ -75,14 +76,15 @@ def plot_trajectory(rec, tool_tip_x_m):
 
 def plot_force(rec, ctrl, hold):
     """Push along the normal against the setpoint; HOLD shaded."""
-    t, push, magnitude = report.contact_forces(rec)
+    t, push, magnitude = recording.contact_forces(rec)
     if not len(t):
         return None
-    setpoint = report.contact_setpoint_n(ctrl)
+    setpoint = ctrl[-1][1].get('contact_force_n') if ctrl else None
     fig, ax = plt.subplots(figsize=(10, 4))
-    ax.plot(t, push, label='push along the normal')
+    ax.plot(t, push, label='push along the normal (F/T)')
     ax.plot(t, magnitude, lw=0.6, alpha=0.6, label='|F|')
-    ax.axhline(setpoint, color='k', ls='--', label='setpoint')
+    if isinstance(setpoint, float):
+        ax.axhline(setpoint, color='k', ls='--', label='setpoint')
     _shade(ax, hold)
     ax.set_xlabel('sim time [s]')
     ax.set_ylabel('force [N]')
@@ -97,7 +99,7 @@ def plot_actuators(rec):
     msgs = [m for _, m in rec.get(topic, ())]
     if not msgs:
         return None
-    t = np.array([report.stamp_s(m) for m in msgs])
+    t = np.array([recording.stamp_s(m) for m in msgs])
     effort = np.array([list(m.effort) for m in msgs])
     position = np.array([list(m.position) for m in msgs])
     fig, (ax_tilt, ax_thrust) = plt.subplots(2, 1, sharex=True, figsize=(10, 6))
@@ -117,8 +119,8 @@ def plot_actuators(rec):
 
 def plot_poi_error(rec, tool_tip_x_m, hold):
     """Tool tip minus POI in the target frame (z = surface normal); HOLD shaded."""
-    target = report.target_pose(rec)
-    t, tips = report.tool_tips(rec, tool_tip_x_m)
+    target = recording.target_pose(rec)
+    t, tips = recording.tool_tips(rec, tool_tip_x_m)
     if target is None or not len(t):
         return None
     poi, R = target
@@ -136,15 +138,15 @@ def plot_poi_error(rec, tool_tip_x_m, hold):
 
 def plot_vision(rec):
     """Per frame: target seen or not, and image -> pose latency."""
-    t, seen = report.detections(rec)
+    t, seen = recording.detections(rec)
     if not len(t):
         return None
-    t_lat, latency = report.frame_latencies_ms(rec)
+    t_lat, latency = recording.frame_latencies_ms(rec)
     fig, (ax_seen, ax_lat) = plt.subplots(2, 1, sharex=True, figsize=(10, 5))
     ax_seen.step(t, seen, where='post')
     ax_seen.set_yticks([0, 1], ['no target', 'target'])
     ax_lat.plot(t_lat, latency, '.', ms=3)
-    ax_lat.set_ylabel('latency [ms]')
+    ax_lat.set_ylabel('image -> pose, recorder clock [ms]')
     ax_lat.set_xlabel('sim time [s]')
     for ax in (ax_seen, ax_lat):
         ax.grid(True)

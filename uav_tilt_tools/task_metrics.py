@@ -37,7 +37,7 @@ def task_results(tasks, t_s, tip_map, force_map, targets=None, wall_normal_map=N
                      success=task.get('success') is True, reason=task.get('reason') or '',
                      contact_lost=int(task.get('contact_lost') or 0),
                      force_setpoint_n=task.get('force_n'))
-        mask = _pushing(task, t_s)
+        mask = pushing(task, t_s)
         if task['kind'] == 'touch':
             entry.update(target=task.get('target', ''),
                          **_touch(task, t_s[mask], tip_map[mask], force_map[mask],
@@ -50,7 +50,7 @@ def task_results(tasks, t_s, tip_map, force_map, targets=None, wall_normal_map=N
     return out
 
 
-def _pushing(task, t_s):
+def pushing(task, t_s):
     """Samples of the task's HOLD or SLIDE: start <= t < end (the end of the data while it
     had not ended)."""
     window = task.get('t_contact_s')
@@ -134,3 +134,21 @@ def _slide(task, t_s, tips, push, normal):
                path_max_error_m=float(distance.max()),
                length_m=float(along[-1] - along[0]), duration_s=float(t_s[-1] - t_s[0]))
     return out
+
+
+# The first touch's keys that summary.json also has at its top level (mission_metrics).
+FIRST_TOUCH_KEYS = ('poi_error_m', 'poi_error_max_m', 'force_setpoint_n', 'force_mean_n',
+                    'force_rms_error_n', 'hold_time_s', 'hold_tip_map')
+
+
+def with_tasks(summary, tasks):
+    """``summary`` (a mission_metrics summary) with the plan's ``tasks`` (None: no plan
+    recorded) and, for a plan of more than one task, its touch keys from the first touch
+    alone: over every HOLD they would mix targets and setpoints. Returns ``summary``."""
+    summary['tasks'] = tasks
+    if tasks and len(tasks) > 1:
+        touches = [task for task in tasks if task['kind'] == 'touch']
+        for key in FIRST_TOUCH_KEYS:
+            if key in summary:
+                summary[key] = touches[0].get(key) if touches else None
+    return summary

@@ -3,7 +3,7 @@ the path against the task's force, and the tool tip's path on the wall against t
 import matplotlib
 import numpy as np
 
-from uav_tilt_tools import report, task_metrics
+from uav_tilt_tools import recording, task_metrics
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (after the headless backend is chosen)
@@ -11,16 +11,15 @@ import matplotlib.pyplot as plt  # noqa: E402  (after the headless backend is ch
 
 def plot_slides(rec, tool_tip_x_m):
     """One row per slide of the recorded plan; None without a slide."""
-    slides = [t for t in report.plan_tasks(rec) or () if t['kind'] == 'slide']
-    t_s, tips, forces = report.wrench_series(rec, tool_tip_x_m)
+    slides = [t for t in recording.plan_tasks(rec) or () if t['kind'] == 'slide']
+    t_s, tips, forces = recording.wrench_series(rec, tool_tip_x_m)
     if not slides or not len(t_s):
         return None
-    targets = report.target_poses(rec)
+    targets = recording.target_poses(rec)
     fig, axes = plt.subplots(len(slides), 2, figsize=(11, 4 * len(slides)), squeeze=False)
     for (ax_force, ax_path), task in zip(axes, slides):
         normal = targets[''][1][:, 2] if '' in targets else np.asarray(task['normal_map'])
-        window = task.get('t_contact_s') or [np.inf, None]
-        mask = (t_s >= window[0]) & (t_s < (np.inf if window[1] is None else window[1]))
+        mask = task_metrics.pushing(task, t_s)
         _, along, uv = task_metrics.slide_geometry(task, tips[mask], normal)
         ax_force.plot(along, forces[mask] @ normal, label='push along the normal')
         ax_force.axhline(task['force_n'], color='k', ls='--', label='task force')

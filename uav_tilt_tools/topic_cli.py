@@ -112,7 +112,7 @@ class _Session:
             print(f'topic {name} did not appear within {timeout_s} s')
             return None
         type_name = topic_graph.topic_types(self.node)[name]
-        qos = topic_graph.subscription_qos(self.node, name, type_name, depth=100)
+        qos = topic_graph.subscription_qos(self.node, name, depth=100)
         self.node.create_subscription(topic_graph.message_class(type_name), name, callback, qos)
         return type_name
 

@@ -5,10 +5,6 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from uav_tilt_common import names
 
-# Sensor data is subscribed best effort (REP-2003, DESIGN section 3).
-BEST_EFFORT_TYPES = frozenset(('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage',
-                               'sensor_msgs/msg/CameraInfo'))
-
 
 def resolve(topic, namespace=names.NAMESPACE):
     """Absolute name of ``topic``; relative names are taken inside ``namespace``."""
@@ -28,13 +24,22 @@ def topic_types(node):
     return {topic: types[0] for topic, types in node.get_topic_names_and_types() if types}
 
 
-def subscription_qos(node, topic, type_name, depth):
-    """A QoS that matches the publishers of ``topic`` as they are now: best effort for
-    sensor data or when any publisher is best effort, transient local when every
-    publisher is (latched topics), else reliable and volatile."""
+def contract_qos(topic, depth):
+    """The subscription QoS that matches this project's own publisher of ``topic`` (relative
+    name, :data:`names.TOPIC_TYPES`): reliable, transient local for the latched ones."""
+    return QoSProfile(
+        depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if topic in names.LATCHED_TOPICS
+        else DurabilityPolicy.VOLATILE)
+
+
+def subscription_qos(node, topic, depth):
+    """A QoS that matches the publishers of ``topic`` as they are now, as rosbag2 chooses
+    it: reliable when every publisher is (so nothing they send is lost), best effort when
+    any one is not (else that one would not match); transient local when every publisher
+    is (latched topics), else volatile."""
     offered = [info.qos_profile for info in node.get_publishers_info_by_topic(topic)]
-    best_effort = type_name in BEST_EFFORT_TYPES or any(
-        q.reliability == ReliabilityPolicy.BEST_EFFORT for q in offered)
+    best_effort = any(q.reliability == ReliabilityPolicy.BEST_EFFORT for q in offered)
     latched = bool(offered) and all(
         q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
     return QoSProfile(

@@ -48,6 +48,10 @@ class OnnxDetector:
         import onnxruntime as ort
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = threads
+        # ONNX Runtime's workers spin between runs by default: on two cores shared with the
+        # physics and control loops that took 2.5x the CPU of the runs themselves (and made
+        # them slower); idle workers sleep instead.
+        opts.add_session_config_entry('session.intra_op.allow_spinning', '0')
         self.session = ort.InferenceSession(str(model_path), opts,
                                             providers=['CPUExecutionProvider'])
         meta = json.loads(self.session.get_modelmeta().custom_metadata_map['detector'])

@@ -33,13 +33,16 @@ TRACK_IOU = 0.3
 class VisionConfig:
     """Parameters of :class:`VisionPipeline`."""
 
-    detect_every: int = param(5, lo=1, hi=1000)
-    conf_thres: float = param(0.25, lo=0.0, hi=1.0)
-    iou_thres: float = param(0.45, lo=0.0, hi=1.0)
-    target_class: str = param('bolt_plate', choices=OBJECT_CLASSES)
-    min_track_quality: float = param(0.5, lo=0.0, hi=1.0)   # below: re-detect this frame
-    pose_window_px: int = param(10, lo=2, hi=50)            # half side of the plane-fit window
-    pixel_sigma_px: float = param(0.5, lo=0.01, hi=10.0)    # POI pixel noise (covariance)
+    detect_every: int = param(5, lo=1, hi=1000,
+                              doc='run the detector every N frames, the KLT tracker between')
+    conf_thres: float = param(0.25, lo=0.0, hi=1.0, doc='detector score threshold')
+    iou_thres: float = param(0.45, lo=0.0, hi=1.0, doc='non-maximum suppression IoU')
+    target_class: str = param('bolt_plate', choices=OBJECT_CLASSES, doc='class to inspect')
+    min_track_quality: float = param(0.5, lo=0.0, hi=1.0,
+                                     doc='KLT inlier ratio below which the frame is re-detected')
+    pose_window_px: int = param(10, lo=2, hi=50, doc='half side of the plane-fit window')
+    pixel_sigma_px: float = param(0.5, lo=0.01, hi=10.0,
+                                  doc='POI pixel noise (pose covariance)')
     klt: KltConfig = nested(KltConfig)
 
 

@@ -10,7 +10,6 @@ usable model the node keeps running and publishes "no target" for every frame.
 """
 import collections
 import dataclasses
-import pathlib
 import time
 
 import numpy as np
@@ -21,17 +20,17 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from uav_tilt_common import names, ros_msgs, ros_qos
+from uav_tilt_common import names, resources, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.targets import no_target_covariance
 from uav_tilt_vision.backends import BACKENDS, load_detector
 from uav_tilt_vision.pipeline import STAGES, VisionConfig, VisionPipeline, check_frame, \
     draw_debug
 from uav_tilt_vision.target_pose import CameraIntrinsics
 
-REPO = pathlib.Path(__file__).resolve().parent.parent
 # Tried in this order, beside ``model_path``, when it cannot be loaded.
 FALLBACK_MODELS = ('detector_int8.onnx', 'detector_pruned.pt', 'detector_fp32.pt')
 # Latency and share statistics cover the last frames.
@@ -41,18 +40,26 @@ STATS_WINDOW = 100
 @dataclasses.dataclass
 class VisionNodeConfig(VisionConfig):
     """Parameters of vision_node (DESIGN section 7 names `model_path`, `backend`,
-    `detect_every` are stable); relative model paths are taken from the repository root."""
+    `detect_every` are stable); a relative model path is looked up in the working
+    directory, then in the package's files (:mod:`uav_tilt_common.resources`)."""
 
-    model_path: str = param('models/detector_int8.onnx')
-    backend: str = param('onnxruntime', choices=BACKENDS + ('auto',))
-    status_rate_hz: float = param(2.0, lo=0.1, hi=20.0)
+    model_path: str = param('models/detector_int8.onnx',
+                            doc='detector file; relative: working directory, else package')
+    backend: str = param('onnxruntime', choices=BACKENDS + ('auto',),
+                         doc='inference backend (auto: by file suffix)')
+    status_rate_hz: float = param(2.0, lo=0.1, hi=20.0, doc='vision/status rate (wall clock)')
+
+
+# Parameters a `ros2 param set` changes while vision runs (the pipeline reads them every
+# frame); the others are read-only.
+DYNAMIC = ('detect_every', 'conf_thres', 'iou_thres', 'min_track_quality', 'pose_window_px',
+           'pixel_sigma_px')
 
 
 def open_detector(model_path, backend):
     """``(detector or None, note)``: the asked model, else the first loadable fallback
     beside it; ``note`` is one log line when anything differs from what was asked."""
-    path = pathlib.Path(model_path)
-    path = path if path.is_absolute() else REPO / path
+    path = resources.locate(model_path)
     candidates = [(path, backend)] + [(path.parent / name, 'auto') for name in FALLBACK_MODELS
                                       if path.parent / name != path]
     problems = []
@@ -94,7 +101,7 @@ class VisionNode(Node):
 
     def __init__(self):
         super().__init__('vision', parameter_overrides=[Parameter('use_sim_time', value=True)])
-        self.cfg = declare_config(self, VisionNodeConfig)
+        self.cfg = declare_config(self, VisionNodeConfig, DYNAMIC)
         detector, note = open_detector(self.cfg.model_path, self.cfg.backend)
         self.backend = detector.backend if detector is not None else 'none'
         self.model = detector.model_path if detector is not None else ''
@@ -214,7 +221,7 @@ class VisionNode(Node):
 
 def main(args=None):
     """Entry point of the vision_node executable."""
-    return run_node(VisionNode, args)
+    return run_node(VisionNode, args, spin=spin_events)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,31 @@
+"""Each way a start parameter can be wrong stops the node with one line naming it, exit code
+2 and no traceback: a value of the wrong type (rclpy's own exception otherwise), out of
+range, not a choice, or a file that is not there."""
+import subprocess
+import sys
+
+import pytest
+
+
+@pytest.mark.parametrize('module, value, words', [
+    ('uav_tilt_sim.plant_node', 'rtf:=1', ["'rtf'", 'floating-point', '1.0']),
+    ('uav_tilt_sim.plant_node', 'scenario_file:=/nonexistent/windy.yaml',
+     ["'scenario_file'", '/nonexistent/windy.yaml', 'no such file']),
+    ('uav_tilt_sim.plant_node', 'mode:=fast', ["'mode'", "'fast'", "'lockstep'"]),
+    ('uav_tilt_control.controller_node', 'contact_force:=4', ["'contact_force'", '4']),
+    ('uav_tilt_control.controller_node', 'mission.hold_time_s:=-1.0',
+     ["'mission.hold_time_s'", '-1.0', '[0.0, 600.0]']),
+    ('uav_tilt_vision.vision_node', 'detect_every:=2.5', ["'detect_every'", 'integer']),
+    ('uav_tilt_tools.recorder_node', 'flush_period_s:=often', ["'flush_period_s'", 'often']),
+])
+def test_a_bad_parameter_is_one_line_and_exit_code_2(tmp_path, module, value, words):
+    result = subprocess.run([sys.executable, '-m', module, '--ros-args', '-r', '__ns:=/uav',
+                             '-p', value], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=120)
+    output = result.stdout + result.stderr
+    assert result.returncode == 2, output
+    assert 'Traceback' not in output
+    fatal = [line for line in output.splitlines() if 'FATAL' in line]
+    assert len(fatal) == 1, output
+    for word in words:
+        assert word in fatal[0], fatal[0]

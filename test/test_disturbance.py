@@ -1,0 +1,41 @@
+"""The external-force observer: it finds what nobody commanded or measured, not the contact."""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from uav_tilt_control.disturbance import DisturbanceConfig, DisturbanceObserver
+
+MASS_KG, TAU_S, DT_S = 1.6, 0.025, 1.0 / 300.0
+
+
+def _run(f_ext, f_contact, seconds=2.0, config=None, yaw=0.4):
+    """A point mass under a thrust that follows its command with the rotor lag, an external
+    force and a contact force; the observer sees the IMU's specific force and the F/T."""
+    obs = DisturbanceObserver(MASS_KG, TAU_S, config or DisturbanceConfig(axes=[1, 1, 1]))
+    R = Rotation.from_euler('z', yaw).as_matrix()
+    thrust = np.array([0.0, 0.0, MASS_KG * 9.81])
+    rng = np.random.default_rng(0)
+    for k in range(int(seconds / DT_S)):
+        cmd = np.array([0.3 * np.sin(k * DT_S * 3), 0.0, MASS_KG * 9.81])  # manoeuvring
+        obs.commanded(cmd)
+        thrust = thrust + (1 - np.exp(-DT_S / TAU_S)) * (cmd - thrust)
+        specific = R.T @ (thrust + f_ext + f_contact) / MASS_KG + rng.normal(0, 0.02, 3)
+        obs.update(R, specific, f_contact, DT_S)
+    return obs.f_ext_map
+
+
+def test_finds_a_steady_external_force_while_manoeuvring():
+    f = _run(np.array([1.2, -0.7, 0.3]), np.zeros(3))
+    np.testing.assert_allclose(f, [1.2, -0.7, 0.3], atol=0.03)
+
+
+def test_leaves_the_measured_contact_force_out():
+    f = _run(np.array([0.5, 0.0, 0.0]), np.array([-5.0, 0.4, 0.0]))
+    np.testing.assert_allclose(f, [0.5, 0.0, 0.0], atol=0.03)
+
+
+def test_axes_bound_and_off():
+    f = _run(np.array([3.0, 0.0, 2.0]), np.zeros(3),
+             config=DisturbanceConfig(axes=[1, 1, 0], limit_n=1.0))
+    assert f[2] == 0.0 and np.linalg.norm(f) == pytest.approx(1.0)
+    assert np.all(_run(np.ones(3), np.zeros(3), config=DisturbanceConfig(tau_s=0.0)) == 0.0)

@@ -1,0 +1,37 @@
+"""Package files are found from a source checkout (the installed case: test_colcon.py), and a
+file that is not there is one clear line."""
+import pytest
+
+from ros_graph import REPO
+from uav_tilt_common import resources
+from uav_tilt_common.config import ConfigError
+from uav_tilt_sim.scenario import load_scenario
+
+
+def test_from_the_source_tree_the_files_are_the_checkout(tmp_path, monkeypatch):
+    assert str(resources.source_root()) == REPO and str(resources.share_dir()) == REPO
+    monkeypatch.chdir(tmp_path)     # a relative path not in the working directory
+    assert resources.resolve('config/scenarios/windy.yaml', 'scenario_file') == \
+        resources.share_dir() / 'config' / 'scenarios' / 'windy.yaml'
+    mine = tmp_path / 'config' / 'scenarios' / 'windy.yaml'
+    mine.parent.mkdir(parents=True)
+    mine.write_text('seed: 9\n')
+    # ... unless it is there: the working directory comes first.
+    assert resources.resolve('config/scenarios/windy.yaml', 'scenario_file') == mine
+    assert load_scenario('config/scenarios/windy.yaml').seed == 9
+
+
+@pytest.mark.parametrize('path', ['missing.yaml', '/nonexistent/missing.yaml'])
+def test_a_missing_scenario_is_one_line_naming_the_parameter(path):
+    with pytest.raises(ConfigError) as err:
+        load_scenario(path)
+    message = str(err.value)
+    assert '\n' not in message and "'scenario_file'" in message and 'no such file' in message
+
+
+def test_an_unreadable_scenario_is_one_line(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('wall: [unclosed\n')
+    with pytest.raises(ConfigError) as err:
+        load_scenario(str(bad))
+    assert '\n' not in str(err.value) and "'scenario_file'" in str(err.value)

@@ -1,0 +1,119 @@
+"""The inspection mission's metrics, in one place for `uav-tilt report` (from a recording)
+and the in-process runner and campaign (from their per-tick log). Pure numpy.
+
+Inputs are time series in sim time: the controller's mode (from controller/status or each
+tick), its last status, the F/T force with the true attitude at the same stamp, and the
+true tool tip. Each key means one thing (DESIGN section 7):
+
+- ``success``, ``contact_lost``: what the controller's last status says.
+- ``force_setpoint_n``: the push the controller was asked for (its status key
+  ``contact_force_n``); None when the status does not say.
+- ``force_mean_n``, ``force_rms_error_n``: the push over HOLD, measured by the F/T sensor
+  along the true surface normal (positive pushing); the error is against the setpoint.
+- ``max_force_n``: the largest such push over the whole run.
+- ``poi_error_m``, ``poi_error_max_m``: mean and largest distance from the true tool tip
+  to the true point of interest over HOLD, along the surface (a wall that gives way lets the
+  tip sink in along the normal; that depth is not an error of where it touches).
+- ``hold_time_s``: sim time spent in HOLD; ``mission_time_s``: from leaving IDLE to being
+  back in IDLE (or to the last sample).
+
+HOLD is each run of consecutive samples in that mode, from its first to its last sample.
+"""
+import math
+
+import numpy as np
+
+HOLD = 'HOLD'
+NOT_FLYING = ('IDLE', 'WAITING_FOR_SENSORS')
+MISSION_KEYS = ('success', 'poi_error_m', 'poi_error_max_m', 'force_setpoint_n',
+                'force_mean_n', 'force_rms_error_n', 'max_force_n', 'contact_lost',
+                'hold_time_s', 'mission_time_s')
+
+
+def runs_of_mode(modes, mode):
+    """[(t_first, t_last)] of each run of consecutive ``(t_s, mode)`` samples in ``mode``:
+    strictly inside the mode, whatever the sample rate."""
+    runs, start, last = [], None, None
+    for t, current in modes:
+        if current == mode:
+            start = t if start is None else start
+            last = t
+        elif start is not None:
+            runs.append((start, last))
+            start = None
+    if start is not None:
+        runs.append((start, last))
+    return runs
+
+
+def inside(t, runs):
+    """Boolean mask of the times ``t`` inside any of ``runs``."""
+    t = np.asarray(t, dtype=float)
+    mask = np.zeros(t.shape, dtype=bool)
+    for t0, t1 in runs:
+        mask |= (t >= t0) & (t <= t1)
+    return mask
+
+
+def push_along_normal(R_map_base, force_ee, R_map_target):
+    """Push on the wall [N] of an F/T force (ee_link axes, FLU like base_link): the force
+    on the tool in map along the target's normal z_t, which is positive when pushing."""
+    return float((np.asarray(R_map_base) @ np.asarray(force_ee, dtype=float))
+                 @ np.asarray(R_map_target)[:, 2])
+
+
+def mission_time_s(modes):
+    """Sim time from leaving IDLE to being back in IDLE (or the last sample); None if the
+    vehicle never flew."""
+    flying = [i for i, (_, m) in enumerate(modes) if m not in NOT_FLYING]
+    if not flying:
+        return None
+    start = modes[flying[0]][0]
+    back = [t for t, m in modes[flying[0]:] if m == 'IDLE']
+    return (back[0] if back else modes[-1][0]) - start
+
+
+def mission_summary(modes, status, t_push, push_n, t_tip, tips_map, poi_map, normal_map=None):
+    """The MISSION_KEYS dict; None where the inputs lack the data.
+
+    ``modes``: [(t_s, mode)]; ``status``: the controller's last status {key: value};
+    ``t_push``, ``push_n``: F/T push samples (:func:`push_along_normal`); ``t_tip``,
+    ``tips_map``: true tool tip positions (N, 3); ``poi_map``: the true POI or None, and
+    ``normal_map`` the surface normal there.
+    """
+    hold = runs_of_mode(modes, HOLD)
+    push_n = np.asarray(push_n, dtype=float)
+    held = push_n[inside(t_push, hold)]
+    tips_map = np.asarray(tips_map, dtype=float).reshape(-1, 3)
+    errors = np.zeros(0)
+    if poi_map is not None:
+        offsets = tips_map[inside(t_tip, hold)] - poi_map
+        if normal_map is not None:
+            n = np.asarray(normal_map, dtype=float)
+            offsets = offsets - np.outer(offsets @ n, n)
+        errors = np.linalg.norm(offsets, axis=1)
+    setpoint = json_number(status.get('contact_force_n'))
+    success, lost = status.get('success'), json_number(status.get('contact_lost'))
+    summary = dict(
+        success=success if isinstance(success, bool) else None,
+        poi_error_m=float(errors.mean()) if len(errors) else None,
+        poi_error_max_m=float(errors.max()) if len(errors) else None,
+        force_setpoint_n=setpoint,
+        force_mean_n=float(held.mean()) if len(held) else None,
+        force_rms_error_n=(float(np.sqrt(np.mean((held - setpoint) ** 2)))
+                           if len(held) and setpoint is not None else None),
+        max_force_n=float(push_n.max()) if len(push_n) else None,
+        contact_lost=int(lost) if lost is not None else None,
+        hold_time_s=float(sum(t1 - t0 for t0, t1 in hold)) if hold else None,
+        mission_time_s=mission_time_s(modes),
+    )
+    return {k: (v if isinstance(v, (bool, int, type(None))) else json_number(v))
+            for k, v in summary.items()}
+
+
+def json_number(x):
+    """JSON-safe float: None for missing, non-numeric or non-finite (bools are not numbers)."""
+    if isinstance(x, (int, float, np.number)) and not isinstance(x, bool) \
+            and math.isfinite(float(x)):
+        return float(x)
+    return None

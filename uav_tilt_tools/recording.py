@@ -1,0 +1,209 @@
+"""Reading a recorded run: the MCAP files of RUN_DIR and the series the report needs.
+
+A *recording* is a dict {topic: [(log_time_ns, message), ...]} in the order the recorder got
+them, with topics named as in :mod:`uav_tilt_common.names` (relative to /uav, /clock
+absolute) and messages anything with the ROS field attributes (decoded MCAP, rclpy
+messages, test doubles). Everything past :func:`load_recording` is pure; a topic that is
+missing gives empty series, not errors. Times are sim time (header stamps) unless named
+log time (when the recorder got them).
+"""
+import glob
+import json
+import os
+import struct
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader, make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from uav_tilt_common import names
+from uav_tilt_common.geometry import quat_to_matrix
+from uav_tilt_common.ros_msgs import diagnostics_values, from_stamp, stamp_ns
+from uav_tilt_tools.mission_metrics import push_along_normal
+
+# What the report reads; the camera images and the noisy sensors stay on disk.
+REPORT_TOPICS = (names.CLOCK, names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
+                 names.EE_WRENCH, names.ACTUATORS_STATE, names.ACTUATORS_CMD,
+                 names.CONTROLLER_STATUS, names.VISION_STATUS, names.PLANT_STATUS,
+                 names.TARGET_POSE, names.CAMERA_INFO, names.CONTROLLER_PLAN)
+# ... and every topic under these (each target's ground truth, by its id)
+REPORT_PREFIXES = (names.GROUND_TRUTH_TARGETS + '/',)
+# What reading a file that ends early may raise at its torn tail.
+TORN_TAIL = (McapError, EOFError, struct.error, ValueError)
+
+
+def load_recording(run_dir, namespace=names.NAMESPACE, topics=REPORT_TOPICS, notes=None,
+                   prefixes=REPORT_PREFIXES):
+    """The recording of ``topics`` and of the topics under ``prefixes`` in every
+    RUN_DIR/*.mcap (FileNotFoundError if none).
+
+    A file without its summary (the recorder was killed) is read up to its last complete
+    chunk; one line about it goes to ``notes`` (a list) when given.
+    """
+    paths = sorted(glob.glob(os.path.join(run_dir, '*.mcap')))
+    if not paths:
+        raise FileNotFoundError(f'no *.mcap in {run_dir}')
+    prefix = namespace.rstrip('/') + '/'
+    absolute = {t if t.startswith('/') else prefix + t: t for t in topics}
+    rec = {}
+    for path in paths:
+        complete, count = _read_mcap(path, absolute, (prefix, tuple(prefixes)), rec)
+        if not complete and notes is not None:
+            notes.append(f'{os.path.basename(path)} is incomplete (no footer: the recorder '
+                         f'did not finish); read {count} messages up to its last complete '
+                         f'chunk')
+    return rec
+
+
+def _read_mcap(path, absolute, under, rec):
+    """Add the messages of one file to ``rec``: those on the topics of ``absolute``
+    (absolute name -> recording name) and, ``under`` = (namespace prefix, relative
+    prefixes), those on the namespace's topics under the prefixes. Returns (complete,
+    messages read)."""
+    namespace, prefixes = under
+    count = 0
+    decoders = {}
+    factory = DecoderFactory()
+    with open(path, 'rb') as stream:
+        try:
+            summary, complete = make_reader(stream).get_summary(), True
+        except TORN_TAIL:       # no footer where it belongs
+            summary, complete = None, False
+        stream.seek(0)
+        reader = make_reader(stream) if summary is not None else NonSeekingReader(stream)
+        messages = reader.iter_messages(topics=None if prefixes else list(absolute),
+                                        log_time_order=False)
+        while True:
+            try:
+                schema, channel, message = next(messages)
+            except StopIteration:
+                break
+            except TORN_TAIL:
+                if complete:
+                    raise
+                break           # the chunk being written when the recorder died
+            name = absolute.get(channel.topic)
+            if name is None:
+                relative = channel.topic[len(namespace):]
+                if not (channel.topic.startswith(namespace) and relative.startswith(prefixes)):
+                    continue
+                name = absolute[channel.topic] = relative
+            if channel.id not in decoders:
+                decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+            rec.setdefault(name, []).append(
+                (message.log_time, decoders[channel.id](message.data)))
+            count += 1
+    return complete, count
+
+
+# --- series -------------------------------------------------------------------------------
+def stamp_s(msg):
+    """Header stamp in seconds."""
+    return from_stamp(msg.header.stamp)
+
+
+def statuses(rec, topic):
+    """[(t_s, {key: value})] of a DiagnosticArray topic (its first status)."""
+    return [(stamp_s(m), diagnostics_values(m)) for _, m in rec.get(topic, ()) if m.status]
+
+
+def modes(ctrl):
+    """[(t_s, mode)] of controller statuses."""
+    return [(t, values.get('mode')) for t, values in ctrl]
+
+
+def _pose(pose):
+    p, o = pose.position, pose.orientation
+    return np.array([p.x, p.y, p.z]), quat_to_matrix(np.array([o.x, o.y, o.z, o.w]))
+
+
+def target_pose(rec):
+    """(POI position, R_map_target) of ground_truth/target, or None."""
+    msgs = rec.get(names.GROUND_TRUTH_TARGET)
+    return _pose(msgs[-1][1].pose) if msgs else None
+
+
+def target_poses(rec):
+    """Target id ('' = the first target) -> (POI position, R_map_target) of the ground
+    truth topics."""
+    topics = {'': names.GROUND_TRUTH_TARGET, **{
+        topic[len(names.GROUND_TRUTH_TARGETS) + 1:]: topic for topic in rec
+        if topic.startswith(names.GROUND_TRUTH_TARGETS + '/')}}
+    return {target_id: _pose(rec[topic][-1][1].pose) for target_id, topic in topics.items()
+            if rec.get(topic)}
+
+
+def plan_tasks(rec):
+    """The task entries of the last controller/plan (its JSON), or None."""
+    msgs = rec.get(names.CONTROLLER_PLAN)
+    return json.loads(msgs[-1][1].data)['tasks'] if msgs else None
+
+
+def wrench_series(rec, tool_tip_x_m):
+    """(t_s, tool tips (N, 3), F/T force on the vehicle (N, 3)) in map, of each ee_wrench
+    with the vehicle's ground-truth pose at its stamp."""
+    poses = vehicle_poses(rec)
+    t, tips, forces = [], [], []
+    for _, m in rec.get(names.EE_WRENCH, ()):
+        pose = poses.get(stamp_ns(m.header.stamp))
+        if pose is None:
+            continue
+        f = m.wrench.force
+        t.append(stamp_s(m))
+        tips.append(pose[0] + pose[1][:, 0] * tool_tip_x_m)
+        forces.append(pose[1] @ np.array([f.x, f.y, f.z]))
+    return np.array(t), np.array(tips).reshape(-1, 3), np.array(forces).reshape(-1, 3)
+
+
+def vehicle_poses(rec):
+    """{stamp_ns: (p_map, R_map_base)} of ground_truth/odom."""
+    return {stamp_ns(m.header.stamp): _pose(m.pose.pose)
+            for _, m in rec.get(names.GROUND_TRUTH_ODOM, ())}
+
+
+def tool_tips(rec, tool_tip_x_m):
+    """(t_s, tip positions (N, 3)) of the tool tip in map from ground_truth/odom."""
+    t, tips = [], []
+    for _, m in rec.get(names.GROUND_TRUTH_ODOM, ()):
+        p, R = _pose(m.pose.pose)
+        t.append(stamp_s(m))
+        tips.append(p + R[:, 0] * tool_tip_x_m)
+    return np.array(t), np.array(tips).reshape(-1, 3)
+
+
+def contact_forces(rec):
+    """(t_s, push [N], |F| [N]) of ee_wrench. The push is
+    :func:`mission_metrics.push_along_normal` with the true attitude at that stamp; without
+    the target or that attitude, along -x of the tool, as the controller does."""
+    target = target_pose(rec)
+    poses = vehicle_poses(rec)
+    t, push, magnitude = [], [], []
+    for _, m in rec.get(names.EE_WRENCH, ()):
+        f = m.wrench.force
+        f_ee = np.array([f.x, f.y, f.z])
+        pose = poses.get(stamp_ns(m.header.stamp))
+        if target is not None and pose is not None:
+            push.append(push_along_normal(pose[1], f_ee, target[1]))
+        else:
+            push.append(float(-f_ee[0]))
+        t.append(stamp_s(m))
+        magnitude.append(float(np.linalg.norm(f_ee)))
+    return np.array(t), np.array(push), np.array(magnitude)
+
+
+def frame_latencies_ms(rec):
+    """(t_s, latency ms) per target/pose: its log time minus that of the camera_info with
+    the same stamp (published with the image), i.e. image out -> pose recorded, in the
+    recorder's clock (sim time when it ran with use_sim_time)."""
+    published = {stamp_s(m): log for log, m in rec.get(names.CAMERA_INFO, ())}
+    pairs = [(stamp_s(m), (log - published[stamp_s(m)]) * 1e-6)
+             for log, m in rec.get(names.TARGET_POSE, ()) if stamp_s(m) in published]
+    return np.array(pairs).reshape(-1, 2).T
+
+
+def detections(rec):
+    """(t_s, seen) per target/pose: covariance[0] = -1 means no target in that frame."""
+    pairs = [(stamp_s(m), m.pose.covariance[0] != -1.0)
+             for _, m in rec.get(names.TARGET_POSE, ())]
+    return np.array(pairs, dtype=float).reshape(-1, 2).T
