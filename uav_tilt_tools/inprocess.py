@@ -83,6 +83,18 @@ class Flight:
         """Release the physics server."""
         self.plant.close()
 
+    def _true_push_n(self, in_contact):
+        """Contact force on the wall along -normal [N] from the plant's truth.
+
+        ``in_contact`` (from read_sensors, which saw the true contact force) spares the
+        contact query on free-flight ticks, where the push is below 1e-6 N.
+        """
+        if not in_contact:
+            return 0.0
+        force_ee, _ = self.plant.contact_wrench_ee()
+        R_map_base = quat_to_matrix(self.plant.state().q_map_base)
+        return float((R_map_base @ force_ee) @ self.plant.world.R_map_wall[:, 2])
+
 
 def mission_result(flight):
     """Summary of a plan's run: :func:`mission_metrics.mission_summary` of the log (the
