@@ -1,4 +1,5 @@
-"""`uav-tilt bench sim|control|vision|graph`: one JSON object on stdout (DESIGN section 7)."""
+"""`uav-tilt bench sim|control|vision|graph|slide`: one JSON object on stdout (DESIGN
+section 7). ``slide`` is an accuracy bench (uav_tilt_tools.bench_slide), not a speed one."""
 import json
 import os
 
@@ -23,8 +24,14 @@ def _graph(seconds):
     return bench_graph(seconds)
 
 
+def _slide(seconds):
+    from uav_tilt_tools.bench_slide import bench_slide
+    return bench_slide()        # each case flies its whole slide: no length to choose
+
+
 # Imported on demand: the sim bench need not load torch or the controller.
-BENCHES = {'sim': _sim, 'control': _control, 'vision': _vision, 'graph': _graph}
+BENCHES = {'sim': _sim, 'control': _control, 'vision': _vision, 'graph': _graph,
+           'slide': _slide}
 
 
 def register(sub):
@@ -33,7 +40,7 @@ def register(sub):
     parser.add_argument('what', choices=sorted(BENCHES))
     parser.add_argument('--seconds', type=float, default=None,
                         help='length of each measurement (default: 30 s control, 20 s of '
-                             'simulated time graph, else 10 s)')
+                             'simulated time graph, else 10 s; slide flies whole slides)')
     parser.set_defaults(func=run)
 
 
@@ -42,7 +49,7 @@ def run(args):
     # Benches start node processes: keep them local and away from a running system.
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
-    defaults = {'sim': 10.0, 'control': 30.0, 'vision': 10.0, 'graph': 20.0}
+    defaults = {'sim': 10.0, 'control': 30.0, 'vision': 10.0, 'graph': 20.0, 'slide': 0.0}
     seconds = args.seconds if args.seconds is not None else defaults[args.what]
     print(json.dumps(BENCHES[args.what](seconds)))
     return 0
