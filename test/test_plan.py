@@ -130,3 +130,33 @@ def test_controller_node_stops_with_one_line_on_a_bad_plan(tmp_path):
     fatal = [line for line in out.stderr.splitlines() if line.startswith('[FATAL]')]
     assert len(fatal) == 1 and "'target' = 'plate_z'" in fatal[0], out.stderr
     assert "['plate_a', 'plate_b']" in fatal[0]       # the site's ids came through ROS
+
+
+@pytest.mark.parametrize('argv, words', [
+    (['fly', '--scenario', str(SCENARIO), '--plan', '{plan}'], ['uav-tilt fly:', 'plate_z']),
+    (['campaign', '--n', '1', '--scenario', str(SCENARIO), '--plan', '{plan}'],
+     ['uav-tilt campaign:', 'plate_z']),
+    (['campaign', '--n', '1', '--plan', str(PLAN)], ['--plan and --scenario go together']),
+])
+def test_fly_and_campaign_refuse_a_bad_plan_with_one_line(tmp_path, argv, words):
+    path = tmp_path / 'plan.yaml'
+    path.write_text(yaml.safe_dump({'tasks': [_touch(target='plate_z')]}))
+    cmd = [sys.executable, '-m', 'uav_tilt_tools.cli',
+           *(a.replace('{plan}', str(path)) for a in argv)]
+    out = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and out.stdout == '', out
+    # pybullet's import prints its build time on stderr, whatever the caller does
+    lines = [line for line in out.stderr.strip().splitlines()
+             if not line.startswith('pybullet build time')]
+    assert len(lines) == 1 and all(w in lines[0] for w in words), out.stderr
+
+
+@pytest.mark.parametrize('argv, words', [
+    (['--mission', 'plan'], '--mission plan and --plan FILE go together'),
+    (['--plan', str(PLAN)], '--mission plan and --plan FILE go together'),
+    (['--mission', 'plan', '--plan', 'no_such_plan.yaml'], '--plan: no file'),
+])
+def test_launch_refuses_a_plan_without_its_mission_or_file(tmp_path, argv, words):
+    out = subprocess.run([str(REPO / 'scripts' / 'launch.sh'), *argv], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=30)
+    assert out.returncode == 2 and words in out.stderr, out.stderr
