@@ -13,7 +13,8 @@ import pytest
 
 from ros_graph import REPO
 from uav_tilt_common.vehicle import VehicleParams
-from uav_tilt_tools.report import load_recording, summarize
+from uav_tilt_tools.recording import load_recording
+from uav_tilt_tools.report import summarize
 
 LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
 MODEL = pathlib.Path(REPO) / 'models' / 'detector_int8.onnx'
