@@ -262,8 +262,10 @@ def test_per_task_results_from_the_recorded_plan(tmp_path):
         dict(index=1, kind='slide', force_n=5.0, success=False, reason='off_line',
              contact_lost=2, t_contact_s=[0.2, 0.4], points_map=line,
              normal_map=[-1.0, 0.0, 0.0], length_m=1.0, points_uv=[[0.0, 1.0], [0.0, 2.0]])]))]
-    tasks = report.summarize(rec, TOOL_X)['tasks']
-    touch, slide = tasks
+    summary = report.summarize(rec, TOOL_X)
+    touch, slide = summary['tasks']
+    for key in ('poi_error_m', 'force_setpoint_n', 'force_mean_n', 'force_rms_error_n'):
+        assert summary[key] == touch[key], key          # the first touch's, at 6 N
     held = push[(t >= HOLD_FIRST) & (t < HOLD_LAST)]
     assert touch['success'] and touch['target'] == ''
     assert touch['poi_error_m'] == pytest.approx(0.05, abs=1e-9)
