@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Start the uav_tilt node graph in namespace /uav, each node its own process (DESIGN §6).
 #
-# usage: scripts/launch.sh [--scenario F] [--realtime] [--record DIR] [--mission inspect]
-#                          [--foxglove] [--no-vision] [--target-source vision|ground_truth]
-#                          [--vision-only] [--param NODE.NAME:=VALUE]...
+# usage: scripts/launch.sh [--scenario F] [--realtime] [--record DIR] [--foxglove]
+#          [--mission inspect | --mission plan --plan FILE] [--no-vision]
+#          [--target-source vision|ground_truth] [--vision-only] [--param NODE.NAME:=VALUE]...
 #
-# Lockstep unless --realtime. Ctrl-C or SIGTERM sends SIGINT to every node (as ros2 launch
+# Lockstep unless --realtime. With --mission plan the controller runs the plan FILE, its site
+# (the wall, the target ids) taken from the scenario as a survey would give it.
+# Ctrl-C or SIGTERM sends SIGINT to every node (as ros2 launch
 # does: every node shuts down cleanly on it); nodes still running after UAV_TILT_GRACE_S
 # (5, whole) seconds are killed. Should this script be killed outright (SIGKILL), its
 # nodes get SIGTERM from the kernel (UAV_TILT_PARENT_PID, uav_tilt_common/parent_watch.py).
@@ -32,7 +34,7 @@ REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 CONFIG=$REPO/config
 GRACE_S=${UAV_TILT_GRACE_S:-5}
 
-scenario='' realtime=0 record='' mission='' foxglove=0 vision=1 target_source=''
+scenario='' realtime=0 record='' mission='' plan='' foxglove=0 vision=1 target_source=''
 vision_only=0
 PARAMS=()
 while (($#)); do
@@ -42,8 +44,9 @@ while (($#)); do
         --record) record=${2:-}; [[ -n $record ]] || die '--record needs a directory'; shift 2 ;;
         --mission)
             mission=${2:-}
-            [[ $mission == inspect ]] || die "--mission: 'inspect' is the only mission"
+            [[ $mission == inspect || $mission == plan ]] || die "--mission: 'inspect' or 'plan'"
             shift 2 ;;
+        --plan) plan=${2:-}; [[ -n $plan ]] || die '--plan needs a file'; shift 2 ;;
         --foxglove) foxglove=1; shift ;;
         --no-vision) vision=0; shift ;;
         --target-source)
@@ -62,6 +65,10 @@ while (($#)); do
     esac
 done
 
+if [[ $mission == plan && -z $plan ]] || [[ -n $plan && $mission != plan ]]; then
+    die '--mission plan and --plan FILE go together'
+fi
+[[ -z $plan || -f $plan ]] || die "--plan: no file $plan"
 if ((vision_only)) && [[ -n $record$mission$scenario$target_source ]] \
         || ((vision_only && (foxglove || !vision || realtime))); then
     die '--vision-only starts vision alone: it takes no other option but --param'
@@ -197,6 +204,12 @@ if ((!vision_only)); then
     ros_args controller
     [[ -z $target_source ]] || CMD+=(-p "target_source:=$target_source")
     [[ -z $mission ]] || CMD+=(-p "autostart:=$mission")
+    if [[ -n $plan ]]; then
+        # the site the plan is checked against: the scenario's wall and target ids
+        site=$("$PY" -m uav_tilt_tools.site_params "$scenario") || die 'bad scenario for the site'
+        mapfile -t SITE <<<"$site"
+        CMD+=(-p "plan_file:=$(realpath "$plan")" "${SITE[@]}")
+    fi
     realtime_priority "$RT_PRIORITY"
     start controller
     # The plant owns time: it starts last, so that its first ticks find the others

@@ -229,7 +229,7 @@ def test_bad_arguments_start_nothing(tmp_path):
     result = subprocess.run([LAUNCH, '--mission', 'survey'], cwd=tmp_path,
                             capture_output=True, text=True, timeout=30)
     assert result.returncode == 2
-    assert "'inspect' is the only mission" in result.stderr
+    assert "--mission: 'inspect' or 'plan'" in result.stderr
 
 
 @pytest.mark.parametrize('modes, success, result', [

@@ -115,3 +115,80 @@ def test_rotor_lag_and_servo_rate_limit(plant_factory):
     tilts = plant.read_sensors().tilts_rad
     # 0.1 s at <= 5 rad/s cannot exceed 0.5 rad; it must be well on the way.
     assert 0.25 < tilts[0] <= 0.5 + 1e-3 and -0.5 - 1e-3 <= tilts[1] < -0.25
+
+
+def _joint_force_map(plant):
+    """The contact force on the tool from the tool joint's reaction (a second, independent
+    reading): the joint holds the tool against the contact and its weight, quasi-static."""
+    import pybullet as p
+    from uav_tilt_sim import vehicle_body
+    reaction = p.getJointState(plant.body, vehicle_body.TOOL, physicsClientId=plant.client)[2]
+    R_map_base = Rotation.from_quat(plant.state().q_map_base).as_matrix()
+    return -R_map_base @ np.array(reaction[:3]) + [0.0, 0.0, plant.vehicle.tool_mass_kg * GRAVITY]
+
+
+def _pressing_flight(tmp_path, on):
+    """A Flight holding the tool on a bolt plate ('plate') or sliding it up the bare wall
+    ('wall', 0.1 m/s with 5 N, friction 0.4), the tool joint's reaction sensor on."""
+    import pybullet as p
+    import yaml
+    from uav_tilt_common.config import from_dict
+    from uav_tilt_control.controller_core import ControllerConfig
+    from uav_tilt_control.mission import Mode
+    from uav_tilt_sim import vehicle_body
+    from uav_tilt_tools.inprocess import Flight
+    from uav_tilt_tools.site_params import site_overrides
+    scenario = load_scenario()
+    scenario.wall.friction = 0.4
+    values = {'target_source': 'ground_truth', 'mission.hold_time_s': 30.0}
+    if on == 'wall':
+        plan = tmp_path / 'plan.yaml'
+        plan.write_text(yaml.safe_dump({'tasks': [{'slide': {
+            'from_uv_m': [1.5, 1.0], 'to_uv_m': [1.5, 2.0], 'speed_m_s': 0.1}}]}))
+        values.update(site_overrides(scenario), plan_file=str(plan))
+    flight = Flight(scenario, from_dict(ControllerConfig, values))
+    p.enableJointForceTorqueSensor(flight.plant.body, vehicle_body.TOOL, True,
+                                   physicsClientId=flight.plant.client)
+    flight.step()
+    assert flight.core.inspect()[0]
+    pushing = Mode.SLIDE if on == 'wall' else Mode.HOLD
+    assert flight.run(60.0, until=lambda f: f.core.mission.mode == pushing)
+    return flight
+
+
+@pytest.mark.parametrize('on', ['plate', 'wall'])
+def test_the_force_torque_sensor_reads_friction_with_its_sign(tmp_path, on):
+    """PyBullet reports a contact's friction along directions that depend on the pair: the
+    F/T must read it on the tool whatever the body touched, as the tool joint carries it."""
+    flight = _pressing_flight(tmp_path, on)
+    plant = flight.plant
+    normal = plant.world.R_map_wall[:, 2]
+    try:
+        if on == 'plate':
+            plant.external_force_map = np.array([0.0, 0.0, 3.0])   # static friction holds
+        else:
+            flight.run(2.0)                                         # past the speed-up
+        readings, joint, slip = [], [], []
+        prev_tip = plant.tool_tip_map()
+        for _ in range(300):
+            flight.step()
+            force_ee, _ = plant.contact_wrench_ee()
+            readings.append(Rotation.from_quat(plant.state().q_map_base).apply(force_ee))
+            joint.append(_joint_force_map(plant))
+            tip = plant.tool_tip_map()
+            slip.append((tip - prev_tip) / plant.dt_tick)
+            prev_tip = tip
+        readings, joint, slip = np.array(readings), np.array(joint), np.array(slip)
+        tangential = readings - np.outer(readings @ normal, normal)
+        assert np.abs(tangential).max() > 0.5         # a real tangential load
+        # within the tool's inertia (60 g): the same force, friction sign included
+        assert np.abs(readings - joint).max() < 0.1
+        if on == 'wall':
+            # sliding: friction opposes the slip, with the wall's coefficient
+            sliding = np.linalg.norm(slip, axis=1) > 0.05
+            assert sliding.sum() > 100
+            assert np.all(np.sum(tangential[sliding] * slip[sliding], axis=1) < 0.0)
+            ratio = np.linalg.norm(tangential[sliding], axis=1) / (readings[sliding] @ normal)
+            assert np.median(ratio) == pytest.approx(0.4, rel=0.03)
+    finally:
+        flight.close()

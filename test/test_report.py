@@ -49,7 +49,7 @@ def controller_status(contact_force_n, loop_rate_hz=298.5):
     core.on_odometry(VehicleState(0.0, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]),
                                   np.zeros(3), np.zeros(3)))
     _, values = core.tick(0.0, np.zeros(3), 1.0 / 300)
-    values.update(_loop_stats([1.0 / loop_rate_hz] * 10, [1e-4] * 10, 1.0 / 300))
+    values.update(_loop_stats([1.0 / loop_rate_hz] * 10, [1e-4] * 10, 1.0 / loop_rate_hz))
     return values
 
 
@@ -241,3 +241,42 @@ def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, cap
     assert report.run(argparse.Namespace(run_dir=str(run))) == 0
     assert 'incomplete' not in capsys.readouterr().out
     assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
+
+
+def _plan_message(tasks):
+    from std_msgs.msg import String
+    return String(data=json.dumps({'tasks': tasks, 'wall': None}))
+
+
+def test_per_task_results_from_the_recorded_plan(tmp_path):
+    """A touch (HOLD_FIRST..HOLD_LAST) and a slide window over the same synthetic run: the
+    touch's keys as the top level's, the slide's path error is the tip's distance from its
+    line in the wall's plane (the normal part, the push's depth, left out)."""
+    push = 5.0 + np.where(np.arange(N) % 2 == 0, 0.2, -0.2)
+    rec, t = synthetic_recording(push)
+    tip = POI + TIP_OFFSET
+    line = [(tip + [0.03, 0.02, z]).tolist() for z in (-0.5, 0.5)]   # 3 cm deep, 2 cm aside
+    rec[names.CONTROLLER_PLAN] = [(wall_ns(0.0), _plan_message([
+        dict(index=0, kind='touch', target='', force_n=6.0, success=True, reason='',
+             contact_lost=0, t_contact_s=[HOLD_FIRST, HOLD_LAST]),
+        dict(index=1, kind='slide', force_n=5.0, success=False, reason='off_line',
+             contact_lost=2, t_contact_s=[0.2, 0.4], points_map=line,
+             normal_map=[-1.0, 0.0, 0.0], length_m=1.0, points_uv=[[0.0, 1.0], [0.0, 2.0]])]))]
+    summary = report.summarize(rec, TOOL_X)
+    touch, slide = summary['tasks']
+    for key in ('poi_error_m', 'force_setpoint_n', 'force_mean_n', 'force_rms_error_n'):
+        assert summary[key] == touch[key], key          # the first touch's, at 6 N
+    held = push[(t >= HOLD_FIRST) & (t < HOLD_LAST)]
+    assert touch['success'] and touch['target'] == ''
+    assert touch['poi_error_m'] == pytest.approx(0.05, abs=1e-9)
+    assert touch['force_mean_n'] == pytest.approx(held.mean(), abs=1e-9)
+    assert touch['force_rms_error_n'] == pytest.approx(np.sqrt(np.mean((held - 6.0) ** 2)))
+    slid = push[(t >= 0.2) & (t < 0.4)]
+    assert (slide['success'], slide['reason'], slide['contact_lost']) == (False, 'off_line', 2)
+    assert slide['path_rms_error_m'] == pytest.approx(0.02, abs=1e-9)
+    assert slide['path_max_error_m'] == pytest.approx(0.02, abs=1e-9)
+    assert slide['length_m'] == pytest.approx(0.0, abs=1e-12)          # it did not move
+    assert slide['duration_s'] == pytest.approx(0.2 - DT, abs=DT / 2)
+    assert slide['force_rms_error_n'] == pytest.approx(np.sqrt(np.mean((slid - 5.0) ** 2)))
+    written = write_plots(rec, str(tmp_path), TOOL_X)
+    assert str(tmp_path / 'slides.png') in written

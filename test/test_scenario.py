@@ -7,7 +7,7 @@ import pytest
 from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
-from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
+from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario, target_ids
 
 SCENARIOS = sorted((pathlib.Path(__file__).parent.parent / 'config' / 'scenarios')
                    .glob('*.yaml'))
@@ -37,9 +37,35 @@ def test_wall_rotation_faces_the_vehicle_and_leans_away():
     assert abs(R[:, 0][2]) < 1e-12         # the wall's x axis stays horizontal
 
 
-def test_two_targets_or_unknown_class_are_rejected():
+def test_targets_without_ids_or_of_another_class_are_rejected():
     with pytest.raises(ConfigError, match='targets'):
         check_scenario(from_dict(Scenario, {'objects': [
-            {'cls': 'gauge', 'target': True}, {'cls': 'bolt_plate', 'target': True}]}))
+            {'cls': 'bolt_plate', 'target': True}, {'cls': 'bolt_plate', 'target': True}]}))
+    with pytest.raises(ConfigError, match=r"objects\[0\]\.cls.*bolt_plate"):
+        check_scenario(from_dict(Scenario, {'objects': [{'cls': 'gauge', 'target': True}]}))
     with pytest.raises(ConfigError, match=r"objects\[0\]\.cls"):
         from_dict(Scenario, {'objects': [{'cls': 'teapot'}]})
+    for bad, words in (([{'id': 'a'}, {'id': 'a'}], 'not unique'),
+                       ([{'id': '1st'}], 'a letter')):
+        objects = [{'cls': 'bolt_plate', 'target': True, **o} for o in bad]
+        with pytest.raises(ConfigError, match=words):
+            check_scenario(from_dict(Scenario, {'objects': objects}))
+
+
+def test_several_targets_each_have_their_ground_truth():
+    scenario = load_scenario(SCENARIOS[0].parent / 'plan.yaml')
+    assert target_ids(scenario) == ['plate_a', 'plate_b']
+    plant = Plant(PlantCoreConfig(), scenario)
+    try:
+        world = plant.world
+        assert set(world.targets) == {'plate_a', 'plate_b'}
+        for o in scenario.objects:
+            if o.target:
+                poi, R = world.targets[o.id]
+                # on the wall, at the object's (u, v), one panel in front of the surface
+                uvn = world.R_map_wall.T @ (poi - world.wall_origin_map)
+                np.testing.assert_allclose(uvn, [o.u_m, o.v_m, 0.01], atol=1e-9)
+        # the first target stays the scenario's target (ground_truth/target)
+        np.testing.assert_allclose(world.target_poi_map, world.targets['plate_a'][0])
+    finally:
+        plant.close()

@@ -111,6 +111,27 @@ def test_reacquisition_after_consistent_rejections():
     assert np.linalg.norm(est.estimate().p_poi_map - moved) < 1e-6
 
 
+def test_a_hint_aims_the_estimate_and_bounds_its_reacquisition():
+    """A plan's next target: the estimate of the last one is forgotten when it is not near
+    the new hint, and a look-alike seen away from the hint never replaces the target."""
+    cfg = TargetEstimatorConfig(reacquire_n=5)
+    est = _estimator(cfg)
+    _fill(est, 1.0)
+    est.add_measurement(0.1, *_measurement_at(0.1), None)
+    est.aim(P_POI_MAP + [0.0, 0.1, 0.0])                    # the same target: kept
+    assert est.estimate() is not None
+    other = P_POI_MAP + [0.0, 1.0, 0.0]
+    est.aim(other + [0.0, 0.2, -0.1])                        # the next one: forgotten
+    assert est.estimate() is None
+    assert est.add_measurement(0.2, *_measurement_at(0.2, p_map=other), None)
+    # the first target seen again and again, 1 m from the hint: refused, not reacquired
+    for k in range(10):
+        t = 0.3 + 0.03 * k
+        est.add_measurement(t, *_measurement_at(t), None)
+    assert est.counters['reacquired'] == 0 and est.counters['switch_refused'] == 2
+    assert np.linalg.norm(est.estimate().p_poi_map - other) < 1e-6
+
+
 def test_nonfinite_rejected():
     est = _estimator()
     _fill(est, 1.0)

@@ -34,14 +34,15 @@ UNIT_SUFFIXES = (
 
 def param(default: Any, lo: float | None = None, hi: float | None = None,
           choices: list[Any] | tuple[Any, ...] | None = None, length: int | None = None,
-          items: type | None = None, doc: str | None = None, unit: str | None = None) -> Any:
+          items: type | None = None, doc: str | None = None, unit: str | None = None,
+          item_length: int | None = None) -> Any:
     """A config field with its allowed range [lo, hi], choices, fixed list length, or the
     config dataclass (or, for a list that may be empty, the scalar type: float, int, str)
-    ``items`` that every element of a list field must be; ``doc`` says
-    what it is and ``unit`` its unit when the name's suffix does not (see
-    :func:`description`)."""
+    ``items`` that every element of a list field must be; ``item_length``: every element is
+    itself a list of that many numbers in [lo, hi] (points); ``doc`` says what it is and
+    ``unit`` its unit when the name's suffix does not (see :func:`description`)."""
     meta = {'lo': lo, 'hi': hi, 'choices': choices, 'length': length, 'items': items,
-            'doc': doc, 'unit': unit}
+            'doc': doc, 'unit': unit, 'item_length': item_length}
     if isinstance(default, (list, dict)):
         return dataclasses.field(default_factory=lambda: type(default)(default), metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -96,6 +97,10 @@ def check_field(name: str, value: Any, default: Any, meta: Mapping[str, Any]) ->
         if isinstance(items, type) and dataclasses.is_dataclass(items):
             return [v if isinstance(v, items) else
                     from_dict(items, v, f'{name}[{i}].') for i, v in enumerate(value)]
+        if meta.get('item_length') is not None:
+            point = {**meta, 'length': meta['item_length'], 'item_length': None,
+                     'items': float}
+            return [check_field(f'{name}[{i}]', v, [], point) for i, v in enumerate(value)]
         item_default = default[0] if default else (items() if items else 0.0)
         return [_check_scalar(name, v, item_default, meta) for v in value]
     return _check_scalar(name, value, default, meta)

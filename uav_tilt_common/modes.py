@@ -13,6 +13,7 @@ class Mode(str, enum.Enum):
     APPROACH = 'APPROACH'
     CONTACT = 'CONTACT'
     HOLD = 'HOLD'
+    SLIDE = 'SLIDE'
     TARGET_LOST = 'TARGET_LOST'
     RETREAT = 'RETREAT'
     LAND = 'LAND'

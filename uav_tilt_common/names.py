@@ -29,8 +29,10 @@ VISION_DEBUG_IMAGE = 'vision/debug_image'
 SETPOINT_POSE = 'setpoint/pose'
 GROUND_TRUTH_ODOM = 'ground_truth/odom'
 GROUND_TRUTH_TARGET = 'ground_truth/target'
+GROUND_TRUTH_TARGETS = 'ground_truth/targets'     # + '/<id>': each target of a scenario
 PLANT_STATUS = 'plant/status'
 CONTROLLER_STATUS = 'controller/status'
+CONTROLLER_PLAN = 'controller/plan'     # std_msgs/String (JSON), latched
 VISION_STATUS = 'vision/status'
 
 # Controller services (std_srvs/Trigger).
@@ -58,6 +60,12 @@ TOPIC_TYPES = {
     GROUND_TRUTH_TARGET: 'geometry_msgs/msg/PoseStamped',
     PLANT_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
     CONTROLLER_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+    CONTROLLER_PLAN: 'std_msgs/msg/String',
     VISION_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
 }
-LATCHED_TOPICS = (GROUND_TRUTH_TARGET,)
+LATCHED_TOPICS = (GROUND_TRUTH_TARGET, CONTROLLER_PLAN)
+
+
+def ground_truth_target(target_id=''):
+    """The ground-truth topic of target ``target_id`` ('' = the scenario's first target)."""
+    return f'{GROUND_TRUTH_TARGETS}/{target_id}' if target_id else GROUND_TRUTH_TARGET

@@ -13,58 +13,53 @@ import math
 import numpy as np
 
 from uav_tilt_common.config import ConfigError, nested, param
-from uav_tilt_common.geometry import quat_multiply, rotvec_to_quat, wall_point
+from uav_tilt_common.geometry import quat_multiply, rotvec_to_quat
 from uav_tilt_common.state import ActuatorCommand, VehicleState
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import frames
 from uav_tilt_control.flight_core import FlightCore, FlightCoreConfig
 from uav_tilt_control.mission import (DEFAULT_CONTACT_FORCE_N, NEAR_WALL, Mission,
                                       MissionConfig, Mode)
+from uav_tilt_control.plan import load_plan, one_touch_plan
+from uav_tilt_control.site import SiteConfig
 from uav_tilt_control.target_estimator import TargetEstimator, TargetEstimatorConfig
 
 TARGET_SOURCES = ('vision', 'ground_truth')
-
-
-@dataclasses.dataclass
-class SiteConfig:
-    """What a drawing or a prior survey of the site says: the wall (the scenario's
-    convention: its ground line through ``wall_position_m``, ``wall_yaw_deg`` the heading
-    towards it, ``wall_inclination_deg`` its top leaning away) and, optionally, roughly
-    where the target is on it (u right, v up, metres; within about 0.3 m)."""
-
-    wall_position_m: list = param([], lo=-1000.0, hi=1000.0, items=float, unit='m')
-    wall_yaw_deg: float = param(0.0, lo=-180.0, hi=180.0)
-    wall_inclination_deg: float = param(0.0, lo=-30.0, hi=30.0)
-    target_hint_uv_m: list = param([], lo=-1000.0, hi=1000.0, items=float, unit='m')
-
-    def target_hint_map(self):
-        """The hint as a map point, or None without one."""
-        for name in ('wall_position_m', 'target_hint_uv_m'):
-            value = getattr(self, name)
-            if value and len(value) != 2:
-                raise ConfigError(f"parameter 'site.{name}' = {value!r} must have 2 elements")
-        if not self.target_hint_uv_m:
-            return None
-        if not self.wall_position_m:
-            raise ConfigError("parameter 'site.target_hint_uv_m' needs 'site.wall_position_m' "
-                              "(the wall the hint is on)")
-        return wall_point(self.wall_position_m, self.wall_yaw_deg, self.wall_inclination_deg,
-                          *self.target_hint_uv_m)
+__all__ = ['ControllerConfig', 'ControllerCore', 'SiteConfig', 'TARGET_SOURCES', 'plan_of']
 
 
 @dataclasses.dataclass
 class ControllerConfig:
-    """Controller parameters; the top-level names are DESIGN section 7's."""
+    """Controller parameters; the top-level names are DESIGN section 7's. ``autostart``
+    'inspect' runs the one-touch plan (``contact_force`` for mission.hold_time_s), 'plan'
+    the plan in ``plan_file`` (uav_tilt_control.plan), validated against ``site``."""
 
     target_source: str = param('vision', choices=TARGET_SOURCES,
                                doc='where the target comes from (ground_truth: evaluation)')
     contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0, unit='N',
                                  doc='push along the surface normal during HOLD')
-    autostart: str = param('', choices=('', 'inspect'), doc='mission started by itself')
+    autostart: str = param('', choices=('', 'inspect', 'plan'),
+                           doc="mission started by itself: 'inspect' the one-touch plan, "
+                               "'plan' the plan in plan_file")
+    plan_file: str = param('', doc='inspection plan (YAML) for autostart plan')
     flight: FlightCoreConfig = nested(FlightCoreConfig)
     mission: MissionConfig = nested(MissionConfig)
     estimator: TargetEstimatorConfig = nested(TargetEstimatorConfig)
     site: SiteConfig = nested(SiteConfig)
+
+
+def plan_of(cfg):
+    """The tasks that ``inspect`` runs with ControllerConfig ``cfg``: the plan file's,
+    validated against the site, or the one-touch inspection (ConfigError when bad)."""
+    if cfg.autostart == 'plan' and not cfg.plan_file:
+        raise ConfigError("parameter 'autostart' = 'plan' needs 'plan_file'")
+    if cfg.autostart == 'inspect' and cfg.plan_file:
+        raise ConfigError(f"parameter 'plan_file' = {cfg.plan_file!r}: autostart 'inspect' is "
+                          f"the one-touch inspection; a plan file runs with 'plan'")
+    if not cfg.plan_file:
+        return one_touch_plan(cfg.site.check(), cfg.contact_force, cfg.mission.hold_time_s)
+    m = cfg.mission
+    return load_plan(cfg.plan_file, cfg.site, (m.contact_threshold_n, m.force_limit_n))
 
 
 class ControllerCore:
@@ -80,11 +75,13 @@ class ControllerCore:
         self.estimator = TargetEstimator(cfg.estimator, vehicle.camera_in_base())
         self.estimator.hint_map = cfg.site.target_hint_map()
         self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z,
-                               drop_target=self.estimator.reset)
+                               drop_target=self.estimator.reset, plan=plan_of(cfg),
+                               on_task=self._on_task)
         self._odom = None
         self._R_map_base = None     # of the odometry, computed on first use
         self._q_blind = None
-        self._ground_truth = None
+        self._ground_truths = {}    # target id ('' = the target) -> (p_map, R_map_t)
+        self._truth_id = ''         # the target of the task under way
         self._f_contact_map = np.zeros(3)
         self._autostarted = False
         self._was_idle = True
@@ -92,6 +89,24 @@ class ControllerCore:
         # setpoint_hook(setpoint) -> setpoint: an outer loop's correction of the mission's
         # setpoint before the impedance law (a learnt policy, uav_tilt_tools.gym_env)
         self.setpoint_hook = None
+
+    def _on_task(self, task):
+        """A task starts: look for its target near where the plan says it is."""
+        self._truth_id = task.target
+        if task.kind == 'touch':
+            self.estimator.aim(task.hint_map)
+
+    def plan_report(self):
+        """The plan and how each task went, JSON-able (controller/plan): each task's
+        description (uav_tilt_control.plan) with its TaskRecord, and the site's wall."""
+        records = self.mission.records
+        tasks = []
+        for i, task in enumerate(self.mission.plan):
+            entry = dict(index=i, **task.describe())
+            if i < len(records):
+                entry.update(dataclasses.asdict(records[i]))
+            tasks.append(entry)
+        return dict(tasks=tasks, wall=self.config.site.wall_frame())
 
     # ---- inputs ----
 
@@ -117,15 +132,16 @@ class ControllerCore:
         return self.estimator.add_candidates(
             stamp_s, [(c.p_cam, c.n_cam, c.cov_cam) for c in candidates])
 
-    def on_ground_truth_target(self, p_map, q_map_t):
-        """Evaluation mode only: the true target pose (map); ignored with vision."""
+    def on_ground_truth_target(self, p_map, q_map_t, target_id=''):
+        """Evaluation mode only: the true pose (map) of the target ``target_id`` ('' = the
+        target of a one-touch inspection); ignored with vision."""
         if self.config.target_source != 'ground_truth':
             return False
         p_map, q_map_t = np.asarray(p_map, dtype=float), np.asarray(q_map_t, dtype=float)
         if not (np.all(np.isfinite(p_map)) and np.all(np.isfinite(q_map_t))
                 and np.linalg.norm(q_map_t) > 0.5):
             return False
-        self._ground_truth = (p_map, frames.quat_matrix(q_map_t))
+        self._ground_truths[target_id] = (p_map, frames.quat_matrix(q_map_t))
         return True
 
     # ---- services: each returns (ok, message) ----
@@ -161,14 +177,15 @@ class ControllerCore:
         if self._odom is None or not all(map(math.isfinite, gyro.tolist())):
             return self._idle_command(), self._status(t_s, np.inf, {'input_fault': True}, None)
         odom_age_s = t_s - self._odom.t_s
-        if self._ground_truth is not None:
+        truth = self._ground_truths.get(self._truth_id)
+        if truth is not None:
             # the latched pose is re-stamped so the estimate stays valid
-            self.estimator.add_ground_truth(t_s, *self._ground_truth)
+            self.estimator.add_ground_truth(t_s, *truth)
         # once the mission flies to a target it never swaps it for a look-alike
         self.estimator.locked = self.mission.mode in NEAR_WALL
         target = self.estimator.estimate(t_s)
         self.f_normal_n = self._normal_force(target)
-        if self.config.autostart == 'inspect' and not self._autostarted:
+        if self.config.autostart and not self._autostarted:
             self._autostarted = self.mission.inspect()[0]
         setpoint = self.mission.update(t_s, self._odom, target, self.f_normal_n, odom_age_s)
         if self.mission.mode == Mode.IDLE:
@@ -199,7 +216,11 @@ class ControllerCore:
         return self._R_map_base
 
     def _normal_force(self, target):
-        """Push on the wall along -normal [N] (positive pushing), from the F/T reading."""
+        """Push on the wall along -normal [N] (positive pushing), from the F/T reading: along
+        the normal the mission works against near the wall, else the target's."""
+        normal = self.mission.normal_map
+        if normal is not None:
+            return float(self._f_contact_map @ normal)
         if target is not None:
             return float(self._f_contact_map @ target.normal_map)
         # no estimate: the tool axis stands for the normal

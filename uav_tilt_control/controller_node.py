@@ -10,6 +10,8 @@ Bad messages are rejected, counted and logged at most once a second. The 300 Hz 
 """
 import collections
 import dataclasses
+import functools
+import json
 import math
 import time
 
@@ -22,6 +24,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, JointState, PointCloud2
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from uav_tilt_common import cdr, modes, names, ros_msgs, ros_qos
@@ -71,8 +74,13 @@ class ControllerNode(Node):
         sub(self, PointCloud2, names.TARGET_CANDIDATES, self.on_candidates, q)
         sub(self, PoseStamped, names.SETPOINT_POSE, self.on_setpoint, q)
         if self.cfg.target_source == 'ground_truth':
-            sub(self, PoseStamped, names.GROUND_TRUTH_TARGET, self.on_ground_truth,
-                ros_qos.LATCHED)
+            for target_id in ['', *self.cfg.site.target_ids]:
+                sub(self, PoseStamped, names.ground_truth_target(target_id),
+                    functools.partial(self.on_ground_truth, target_id=target_id),
+                    ros_qos.LATCHED)
+        # the plan and how its tasks went, JSON, re-sent when a task record changes
+        self.pub_plan = self.create_publisher(String, names.CONTROLLER_PLAN, ros_qos.LATCHED)
+        self.plan_version = None
         sub(self, Imu, names.IMU, self.on_imu, q, raw=True)
         for srv, method in ((names.SRV_TAKEOFF, self.core.takeoff),
                             (names.SRV_INSPECT, self.core.inspect),
@@ -96,7 +104,8 @@ class ControllerNode(Node):
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f'controller up: target_source={self.cfg.target_source} '
                                f'contact_force={self.cfg.contact_force} N '
-                               f'autostart={self.cfg.autostart!r}')
+                               f'autostart={self.cfg.autostart!r} '
+                               f'tasks={len(self.core.mission.plan)}')
 
     # --- inputs -------------------------------------------------------------------------
     def _reject(self, reason, detail):
@@ -159,13 +168,13 @@ class ControllerNode(Node):
             return
         self.core.on_target_candidates(ros_msgs.from_stamp(msg.header.stamp), candidates)
 
-    def on_ground_truth(self, msg):
-        """Evaluation mode: the true target pose in map."""
+    def on_ground_truth(self, msg, target_id=''):
+        """Evaluation mode: the true pose in map of target ``target_id``."""
         p_map, q_map_t = _pose_arrays(msg.pose)
-        what = 'ground_truth/target'
-        if self._frame_ok(msg.header.frame_id, names.FRAME_MAP, what) and self._finite(
-                np.concatenate([p_map, q_map_t]), what):
-            self.core.on_ground_truth_target(p_map, q_map_t)
+        topic = names.ground_truth_target(target_id)
+        if self._frame_ok(msg.header.frame_id, names.FRAME_MAP, topic) and self._finite(
+                np.concatenate([p_map, q_map_t]), topic):
+            self.core.on_ground_truth_target(p_map, q_map_t, target_id)
 
     def on_setpoint(self, msg):
         """A hover point and heading in map (accepted in HOVER)."""
@@ -219,7 +228,11 @@ class ControllerNode(Node):
 
     # --- status -------------------------------------------------------------------------
     def on_status(self):
-        """controller/status: mode, mission, saturation, rejected inputs, loop statistics."""
+        """controller/status: mode, mission, saturation, rejected inputs, loop statistics;
+        and controller/plan when a task record changed."""
+        if self.core.mission.plan_version != self.plan_version:
+            self.plan_version = self.core.mission.plan_version
+            self.pub_plan.publish(String(data=json.dumps(self.core.plan_report())))
         values = dict(self.status) or dict(mode=modes.WAITING_FOR_SENSORS)
         values.update(ticks=self.ticks, saturated_ticks=self.saturated_ticks,
                       target_source=self.cfg.target_source,

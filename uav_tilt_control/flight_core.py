@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from uav_tilt_common.config import nested
+from uav_tilt_common.geometry import cross3
 from uav_tilt_common.state import ActuatorCommand, VehicleState
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import frames
@@ -42,6 +43,7 @@ class FlightCore:
                                                self.config.disturbance)
         self.attitude = AttitudePid(vehicle.inertia_kgm2, self.config.attitude)
         self.allocator = Allocator(vehicle, self.config.allocation)
+        self._tip_flu = np.array([vehicle.tool_tip_x_m, 0.0, 0.0])
 
     def reset(self):
         """Clear filter and integrator state (e.g. on arming)."""
@@ -74,6 +76,13 @@ class FlightCore:
         # right away while the attitude loop is still converging.
         f_body = R_map_base.T @ f_p_map
         torque_flu = self.attitude.update(R_map_base_d, state, dt_s)
+        if setpoint.tangential_feedforward:
+            # The friction acts at the tool tip: its pitch moment is cancelled too, else the
+            # attitude gives way and the tip leaves the line. Not its yaw moment: the rotors'
+            # drag torque (about 0.25 N m) cannot make it, and cancelling it would also take
+            # away the damping that friction gives a sideways slip of the tip.
+            moment = cross3(self._tip_flu, R_map_base.T @ self.impedance.f_tangential_map)
+            torque_flu = torque_flu - np.array([0.0, moment[1], 0.0])
         result = self.allocator.allocate((f_body[0], f_body[2]), torque_flu)
         given_up_x, given_up_z = result.force_given_up_n
         made_x, made_z = f_body[0] - given_up_x, f_body[2] - given_up_z

@@ -88,11 +88,13 @@ class ImpedanceController:
         self._gains = {contact: (self.config.contact if contact else self.config.free).k_c(
             self.mass_kg) for contact in (False, True)}
         self.f_contact_map = np.zeros(3)
+        self.f_tangential_map = np.zeros(3)    # fed forward this tick (sliding)
         self.f_hover_n = 0.0       # learnt weight correction, map z
 
     def reset(self):
         """Clear the contact-force filter and the hover-thrust estimate."""
         self.f_contact_map = np.zeros(3)
+        self.f_tangential_map = np.zeros(3)
         self.f_hover_n = 0.0
 
     def gains(self, contact):
@@ -128,6 +130,12 @@ class ImpedanceController:
         f_p_map = -f_gravity_map + R_map_t @ (self.mass_kg * accel_t)
         if cfg.contact_feedforward:
             f_p_map -= self.f_contact_map
+        self.f_tangential_map = np.zeros(3)
+        if setpoint.tangential_feedforward:
+            # the wall's plane only: friction is cancelled, the push stays K_z times the depth
+            f_t = R_map_t.T @ self.f_contact_map
+            self.f_tangential_map = R_map_t @ np.array([f_t[0], f_t[1], 0.0])
+            f_p_map -= self.f_tangential_map
         if f_ext_map is not None:
             f_p_map -= f_ext_map
         return f_p_map

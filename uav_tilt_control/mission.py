@@ -1,14 +1,22 @@
-"""Inspection mission and failsafes: a state machine that outputs ImpedanceSetpoints.
+"""Inspection mission and failsafes: a plan executor that outputs ImpedanceSetpoints.
 
-IDLE -> TAKEOFF -> HOVER -> SEARCH -> APPROACH -> CONTACT -> HOLD -> RETREAT -> LAND -> IDLE,
-with TARGET_LOST (hold while the target is not seen) and FAILSAFE_LAND (blind descent on
-stale odometry), modelled on PX4's failsafes. Free flight uses the map frame; from APPROACH
-on, the target frame t of the estimate (z_t = surface normal). References are quintic
-(minimum-jerk) segments so that lambda_d, dlambda_d and ddlambda_d stay consistent.
+A plan is a list of tasks (uav_tilt_control.plan); today's inspection is the one-touch plan.
+IDLE -> TAKEOFF -> HOVER, then per task: a touch SEARCHes for its target (after flying, in
+HOVER, to look at where the plan says it is), APPROACHes it, makes CONTACT and HOLDs the
+push; a slide APPROACHes the start of its line on the site's wall, makes CONTACT and
+SLIDEs along the line; both RETREAT to the standoff. After the last task it LANDs -> IDLE.
+TARGET_LOST holds while the target is not seen, FAILSAFE_LAND descends blind on stale
+odometry (PX4's failsafes). A task that fails (its target never found or lost, no contact,
+contact lost, the tool off the line) is recorded with its reason and the plan goes on; the
+force limit and stale odometry end the plan. Free flight uses the map frame; near the wall
+the target frame t (z_t = surface normal). References are uav_tilt_control.trajectory
+segments, so that lambda_d, dlambda_d and ddlambda_d stay consistent. Each mode's entry and
+tick are in the table :data:`MODES` at the end of this module.
 """
 import collections
 import dataclasses
 import math
+import typing
 
 import numpy as np
 
@@ -17,17 +25,21 @@ from uav_tilt_common.geometry import matrix_to_euler_zyx
 from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
 from uav_tilt_control.impedance import ImpedanceConfig, contact_depth_for_force
+from uav_tilt_control.plan import Slide, Touch
+from uav_tilt_control.target_estimator import TargetEstimate
+from uav_tilt_control.trajectory import MIN_JERK_PEAK, MinJerk, PolylineCruise, Ramp
 from uav_tilt_control.types import ImpedanceSetpoint
 
-# Shortest reference segment: bounds the accelerations of a segment that only has to
-# bring the reference velocity to rest.
-_MIN_SEGMENT_S = 1.0
-# Peak speed of a minimum-jerk segment is 1.875 * distance / duration.
-_MIN_JERK_PEAK = 1.875
 DEFAULT_CONTACT_FORCE_N = 5.0
+__all__ = ['DEFAULT_CONTACT_FORCE_N', 'MODES', 'MinJerk', 'Mission', 'MissionConfig', 'Mode',
+           'NEAR_WALL', 'Ramp', 'TaskRecord']
 
 
-NEAR_WALL = (Mode.APPROACH, Mode.CONTACT, Mode.HOLD, Mode.TARGET_LOST)
+NEAR_WALL = (Mode.APPROACH, Mode.CONTACT, Mode.HOLD, Mode.SLIDE, Mode.TARGET_LOST)
+# Modes in which the reference is in the target frame t (the working frame is not map).
+IN_TARGET_FRAME = NEAR_WALL + (Mode.RETREAT,)
+# A task that did not end: the plan stopped before it, or while it ran.
+NOT_RUN = 'not_run'
 
 
 @dataclasses.dataclass
@@ -93,38 +105,35 @@ class MissionConfig:
     arrive_tol_m: float = param(0.05, lo=0.001, hi=1.0)
     arrive_speed_m_s: float = param(0.1, lo=0.001, hi=1.0)
     arrive_yaw_tol_rad: float = param(0.05, lo=0.001, hi=1.0)
+    # Between tasks: a touch's target is looked for from this far in front of where the plan
+    # says it is (base_link to the wall, on its normal), so that the camera sees it at once.
+    look_distance_m: float = param(1.5, lo=0.3, hi=20.0)
+    # SLIDE: the tool tip's speed rises to the task's and comes down at the end of each leg
+    # with at most this acceleration; the task fails once the tool tip (odometry) is this far
+    # off the line, in the wall's plane.
+    slide_accel_m_s2: float = param(0.1, lo=0.005, hi=2.0)
+    slide_path_tolerance_m: float = param(0.05, lo=0.001, hi=1.0)
 
 
-class MinJerk:
-    """Quintic from (p0, v0, a=0) to (p1, v=0, a=0) with peak speed about v_max."""
+@dataclasses.dataclass
+class TaskRecord:
+    """How a task went: ``success`` (None while it runs or before), the reason it failed,
+    contact losses, and when it ran and pushed (HOLD or SLIDE), sim time."""
 
-    def __init__(self, t0_s, p0, p1, v_max, v0=np.zeros(3)):
-        self.t0_s = t0_s
-        self.p1 = np.asarray(p1, dtype=float).copy()
-        d = self.p1 - p0
-        self.T = max(_MIN_JERK_PEAK * np.linalg.norm(d) / v_max, _MIN_SEGMENT_S)
-        T = self.T
-        self._c = np.array([p0, v0, np.zeros(3),
-                            (20 * d - 12 * v0 * T) / (2 * T ** 3),
-                            (-30 * d + 16 * v0 * T) / (2 * T ** 4),
-                            (12 * d - 6 * v0 * T) / (2 * T ** 5)], dtype=float)
+    kind: str
+    target: str
+    success: bool = None
+    reason: str = ''
+    contact_lost: int = 0
+    t_start_s: float = None
+    t_end_s: float = None
+    t_contact_s: list = None      # [start, end] of HOLD or SLIDE
 
-    def done(self, t_s):
-        """True once the segment has reached p1."""
-        return t_s >= self.t0_s + self.T
-
-    def sample(self, t_s):
-        """(p, v, a) at ``t_s``; held at p1 after the end."""
-        if self.done(t_s):
-            return self.p1.copy(), np.zeros(3), np.zeros(3)
-        t1 = max(t_s - self.t0_s, 0.0)
-        t2 = t1 * t1
-        t3 = t2 * t1
-        # rows: d^k/dtau^k of (1, tau, ..., tau^5); one product gives p, v and a
-        p, v, a = np.array([[1.0, t1, t2, t3, t3 * t1, t3 * t2],
-                            [0.0, 1.0, 2.0 * t1, 3.0 * t2, 4.0 * t3, 5.0 * t3 * t1],
-                            [0.0, 0.0, 2.0, 6.0 * t1, 12.0 * t2, 20.0 * t3]]) @ self._c
-        return p, v, a
+    def outcome(self):
+        """'ok', the failure reason, or '' while not ended."""
+        if self.success is None:
+            return ''
+        return 'ok' if self.success else self.reason
 
 
 SEARCH_LEVELS = 2      # full turns: at the takeoff altitude, then search_climb_m higher
@@ -168,37 +177,18 @@ class SearchState:
         self.agreeing += 1
 
 
-class Ramp:
-    """Constant-velocity segment from p0 along ``velocity`` for at most ``duration`` s (the
-    guarded move of a touch); same interface as :class:`MinJerk`."""
-
-    def __init__(self, t0_s, p0, velocity, duration):
-        self.t0_s = t0_s
-        self.T = float(duration)
-        self._p0 = np.asarray(p0, dtype=float).copy()
-        self._v = np.asarray(velocity, dtype=float).copy()
-        self.p1 = self._p0 + self._v * self.T
-
-    def done(self, t_s):
-        """True once the segment has run its full length."""
-        return t_s >= self.t0_s + self.T
-
-    def sample(self, t_s):
-        """(p, v, a) at ``t_s``; held at the end point after the end."""
-        if self.done(t_s):
-            return self.p1.copy(), np.zeros(3), np.zeros(3)
-        return self._p0 + self._v * max(t_s - self.t0_s, 0.0), self._v.copy(), np.zeros(3)
-
-
 class Mission:
-    """Inspection state machine; call :meth:`update` every control tick."""
+    """Plan executor; call :meth:`update` every control tick."""
 
     def __init__(self, vehicle, config=None, contact_force_n=DEFAULT_CONTACT_FORCE_N,
-                 k_contact_z_n_per_m=None, drop_target=None):
+                 k_contact_z_n_per_m=None, drop_target=None, plan=None, on_task=None):
         """``k_contact_z_n_per_m``: the impedance law's contact K_z, which turns the wanted
         push into a depth (default: that of the default ImpedanceConfig for the vehicle);
         ``drop_target()``: makes the target estimate forget a candidate SEARCH did not
-        confirm (the estimator's reset)."""
+        confirm (the estimator's reset); ``plan``: the tasks (uav_tilt_control.plan) that
+        :meth:`inspect` runs, by default one touch of the target with ``contact_force_n``
+        for ``hold_time_s``; ``on_task(task)``: called as each task starts (the estimator
+        then aims at the task's target)."""
         self.vehicle = vehicle
         self.config = config or MissionConfig()
         if k_contact_z_n_per_m is None:
@@ -213,6 +203,9 @@ class Mission:
             raise ConfigError(
                 f"parameter 'target_lost_retreat_s' = {self.config.target_lost_retreat_s!r} "
                 f"must exceed target_lost_hold_s = {self.config.target_lost_hold_s!r}")
+        self.plan = list(plan) if plan is not None else [
+            Touch('', None, None, self.contact_force_n, self.config.hold_time_s)]
+        self._on_task = on_task
         self._mode = Mode.IDLE
         self._now_s = None
         self._t_mode_s = 0.0
@@ -227,20 +220,24 @@ class Mission:
         self._pitch = 0.0
         self._contact_gains = False
         self._inspect_pending = False
-        self._after_retreat = Mode.LAND
+        self._after_retreat = Mode.LAND     # None: the plan's next task
         self._resume_mode = Mode.APPROACH
         self._target_seen_s = -np.inf
         self._last_tick_s = None
         self._landing_since_s = None
         self._contact_ticks = 0
         self._contact_phase = ''       # CONTACT: 'close', 'touch', 'press'
+        self._hover_phase = ''         # HOVER: 'transit' while flying to the next task
         self._drop_target = drop_target
         self._search = SearchState()
-        self._depth_correction_m = 0.0  # HOLD: from the push error (along -z_t)
+        self._depth_correction_m = 0.0  # HOLD, SLIDE: from the push error (along -z_t)
         self.first_touch_peak_n = 0.0
         self._no_force_since_s = None
         self._in_contact = False
-        self._hold_completed = False
+        self._task_index = -1
+        self._records = []
+        self.plan_version = 0           # changes whenever a task record does
+        self._completed = False
         self._success = False
         self._failsafe_reason = ''
         self.contact_lost = 0
@@ -255,24 +252,48 @@ class Mission:
     @property
     def phase(self):
         """What the mode is doing: SEARCH 'sweep', 'climb', 'confirm', 'closer'; CONTACT
-        'close', 'touch', 'press'; '' otherwise."""
+        'close', 'touch', 'press'; HOVER 'transit' (to the next task); '' otherwise."""
         if self._mode == Mode.SEARCH:
             return self._search.phase
+        if self._mode == Mode.HOVER:
+            return self._hover_phase
         return self._contact_phase if self._mode == Mode.CONTACT else ''
 
     @property
+    def task(self):
+        """The task under way (or the last one run), None before the plan starts."""
+        return self.plan[self._task_index] if self._task_index >= 0 else None
+
+    @property
+    def records(self):
+        """One :class:`TaskRecord` per task of the plan under way (empty before)."""
+        return list(self._records)
+
+    @property
+    def normal_map(self):
+        """The surface normal the mission works against (z_t) near the wall, else None."""
+        return self._R_map_t[:, 2].copy() if self._mode in IN_TARGET_FRAME else None
+
+    @property
     def status(self):
-        """Mode, time in mode, failsafe reason and outcome of the inspection."""
+        """Mode, time in mode, failsafe reason, outcome, and the task under way."""
+        task = self.task
         return dict(
             mode=self._mode.value,
             phase=self.phase,
             time_in_mode_s=0.0 if self._now_s is None else self._now_s - self._t_mode_s,
             failsafe_reason=self._failsafe_reason,
-            inspection_completed=self._hold_completed,
+            inspection_completed=self._completed,
             success=self._success,
             contact_lost=self.contact_lost,
             in_contact=self._in_contact,
             rejected_setpoints=self.rejected_setpoints,
+            task_index=self._task_index,
+            task_count=len(self.plan),
+            task_kind='' if task is None else task.kind,
+            task_target='' if task is None else task.target,
+            task_progress=self._task_progress(),
+            task_outcomes=','.join(r.outcome() for r in self._records if r.outcome()),
         )
 
     # ---- commands (std_srvs/Trigger later): each returns (accepted, message) ----
@@ -287,42 +308,49 @@ class Mission:
         return True, 'taking off'
 
     def inspect(self):
-        """Run the inspection: from IDLE take off first, from HOVER start SEARCH."""
+        """Run the plan: from IDLE take off first, from HOVER start its first task."""
         if self._mode == Mode.HOVER:
-            self._start_inspection()
-            self._enter(Mode.SEARCH)
-            return True, 'searching for the target'
+            self._start_plan()
+            self._start_task(0)
+            return True, f'starting the plan ({len(self.plan)} tasks)'
         ok, why = self._can_arm()
         if not ok:
             return False, why
-        self._start_inspection()
+        self._start_plan()
         self._inspect_pending = True
         self._enter(Mode.TAKEOFF)
         return True, 'taking off for inspection'
 
     def abort(self):
-        """Leave the wall (RETREAT) when near it, else stop and HOVER."""
+        """Stop the plan: leave the wall (RETREAT) when near it, else stop and HOVER."""
         self._inspect_pending = False
         if self._mode in NEAR_WALL or self._mode == Mode.RETREAT:
+            self._stop_plan('aborted')
             self._after_retreat = Mode.HOVER
             if self._mode != Mode.RETREAT:
                 self._enter(Mode.RETREAT, 'abort')
             return True, 'retreating from the wall'
         if self._mode in (Mode.TAKEOFF, Mode.SEARCH, Mode.LAND, Mode.HOVER):
+            self._stop_plan('aborted')
             if self._mode != Mode.HOVER:
                 self._enter(Mode.HOVER, 'abort')
+            elif self._hover_phase:
+                self._hover_phase = ''      # stop the transit where it is
+                self._plan(self._ref_map()[0], self.config.hover_speed_m_s)
             return True, 'hovering'
         return False, f'nothing to abort in {self._mode.value}'
 
     def land(self):
-        """Land here; near the wall retreat first."""
+        """Stop the plan and land here; near the wall retreat first."""
         self._inspect_pending = False
         if self._mode in NEAR_WALL or self._mode == Mode.RETREAT:
+            self._stop_plan('land_requested')
             self._after_retreat = Mode.LAND
             if self._mode != Mode.RETREAT:
                 self._enter(Mode.RETREAT, 'land requested')
             return True, 'retreating, then landing'
         if self._mode in (Mode.TAKEOFF, Mode.HOVER, Mode.SEARCH, Mode.LAND):
+            self._stop_plan('land_requested')
             if self._mode != Mode.LAND:
                 self._enter(Mode.LAND)
             return True, 'landing'
@@ -334,8 +362,9 @@ class Mission:
         if p.shape != (3,) or not (np.all(np.isfinite(p)) and np.isfinite(yaw_rad)):
             self.rejected_setpoints += 1
             return False, 'setpoint must be 3 finite coordinates and a finite yaw'
-        if self._mode != Mode.HOVER:
-            return False, f'setpoints are accepted in HOVER only, not {self._mode.value}'
+        if self._mode != Mode.HOVER or self._hover_phase:
+            return False, f'setpoints are accepted in HOVER only, not {self._mode.value}' + (
+                f' ({self._hover_phase})' if self._hover_phase else '')
         self._plan(p, self.config.hover_speed_m_s)
         self._yaw_goal = float(yaw_rad)
         return True, 'setpoint accepted'
@@ -359,35 +388,155 @@ class Mission:
             return ImpedanceSetpoint()
         if stale and self._mode not in (Mode.IDLE, Mode.FAILSAFE_LAND):
             self._failsafe('odometry_stale', Mode.FAILSAFE_LAND)
+        if isinstance(self.task, Slide) and self._mode in IN_TARGET_FRAME:
+            # a slide's line is on the site's wall: no detection, the touch finds the surface
+            target = TargetEstimate(self.task.points_map[0], self.task.normal_map, 0.0, True)
         if self._target_usable(target):
             self._target_seen_s = max(self._target_seen_s, now_s - target[2])
         # a broken F/T reading cannot prove contact, nor trip the force limit
         f_n = float(f_contact_n) if math.isfinite(f_contact_n) else 0.0
         if self._mode in NEAR_WALL and f_n > cfg.force_limit_n:
             self._failsafe('force_limit', Mode.RETREAT)
-        getattr(self, '_tick_' + self._mode.value.lower())(target, f_n, stale)
+        MODES[self._mode].tick(self, target, f_n, stale)
         return self._setpoint()
 
-    # ---- per-mode logic ----
+    # ---- the plan ----
+
+    def _start_plan(self):
+        self._completed = False
+        self._success = False
+        self._failsafe_reason = ''
+        self.contact_lost = 0
+        self._target_seen_s = -np.inf
+        self._task_index = -1
+        self._records = [TaskRecord(task.kind, task.target) for task in self.plan]
+        self.plan_version += 1
+
+    def _plan_running(self):
+        return 0 <= self._task_index < len(self._records) and \
+            self._records[self._task_index].success is None
+
+    def _start_task(self, index):
+        """Fly to task ``index`` (free flight), or land after the last one."""
+        cfg = self.config
+        self._task_index = min(index, len(self.plan) - 1)
+        if index >= len(self.plan):
+            self._completed = all(r.success for r in self._records)
+            self._after_retreat = Mode.LAND
+            self._enter(Mode.LAND, 'plan complete')
+            return
+        task = self.plan[index]
+        record = self._records[index]
+        record.t_start_s = self._now_s
+        self.plan_version += 1
+        self.contact_force_n = float(task.force_n)
+        self._target_seen_s = -np.inf
+        self._event(f'task {index} ({task.kind}) started')
+        if self._on_task is not None:
+            self._on_task(task)
+        if isinstance(task, Slide):
+            self._enter(Mode.APPROACH, f'task {index}: to the line',
+                        target=TargetEstimate(task.points_map[0], task.normal_map, 0.0, True))
+        elif task.hint_map is not None and task.normal_map is not None:
+            # look at where the plan says the target is, facing the wall, then search
+            look = task.hint_map + task.normal_map * cfg.look_distance_m
+            look[2] = max(look[2], cfg.ground_z_m + 2.0 * cfg.land_detect_height_m)
+            if self._mode != Mode.HOVER:
+                self._enter(Mode.HOVER, f'task {index}: to its target')
+            self._hover_phase = 'transit'
+            self._plan(look, cfg.hover_speed_m_s)
+            self._yaw_goal = frames.yaw_facing(task.normal_map, default_rad=self._yaw_ref)
+            # the camera looks along the normal at the hint (down at a wall leaning away)
+            pitch = frames.pitch_facing(task.normal_map) if cfg.pitch_to_normal else 0.0
+            self._pitch = min(max(pitch, -cfg.max_pitch_rad), cfg.max_pitch_rad)
+        else:
+            self._enter(Mode.SEARCH)
+
+    def _end_task(self, success, reason=''):
+        """Record how the task under way ended."""
+        if not self._plan_running():
+            return
+        record = self._records[self._task_index]
+        if record.t_contact_s and record.t_contact_s[1] is None:
+            record.t_contact_s[1] = self._now_s
+        record.success = bool(success) and record.contact_lost == 0
+        record.reason = reason or ('contact_lost' if record.contact_lost else '')
+        record.t_end_s = self._now_s
+        self.plan_version += 1
+
+    def _fail_task(self, reason):
+        """The task under way failed: back off the wall when near it, then the next task."""
+        self._failsafe_reason = reason
+        self._end_task(False, reason)
+        self._event(reason)
+        if self._mode in NEAR_WALL:
+            self._after_retreat = None
+            self._enter(Mode.RETREAT, reason)
+        else:
+            self._start_task(self._task_index + 1)
+
+    def _stop_plan(self, reason):
+        """End the plan here: the task under way and those after it did not run."""
+        if self._plan_running():
+            self._end_task(False, reason)
+        for record in self._records[self._task_index + 1:]:
+            if record.success is None:
+                record.success, record.reason = False, NOT_RUN
+        self.plan_version += 1
+
+    def _task_progress(self):
+        """0..1 of the task under way: the hold's time, the line's length."""
+        if self._mode == Mode.HOLD and self.task is not None and self.task.hold_s > 0.0:
+            return min(self._time_in_mode() / self.task.hold_s, 1.0)
+        if self._mode == Mode.SLIDE:
+            return self._traj.progress(self._now_s)
+        record = self._records[self._task_index] if 0 <= self._task_index < len(
+            self._records) else None
+        return 1.0 if record is not None and record.t_contact_s and record.t_contact_s[1] \
+            is not None else 0.0
+
+    # ---- per-mode logic (see MODES) ----
 
     def _tick_idle(self, target, f_n, stale):
         # keep the reference on the vehicle so that a takeoff starts from where it is
         self._traj = MinJerk(self._now_s, self._state.p_map, self._state.p_map, 1.0)
         self._yaw_ref = self._yaw_goal = _yaw_of(self._state)
 
+    def _enter_takeoff(self, previous, target):
+        p_meas = self._state.p_map
+        goal = np.array([p_meas[0], p_meas[1], self.config.takeoff_altitude_m])
+        self._to_map()
+        self._traj = MinJerk(self._now_s, p_meas, goal, self.config.climb_speed_m_s)
+
     def _tick_takeoff(self, target, f_n, stale):
         if self._arrived():
             self._enter(Mode.HOVER)
 
+    def _enter_hover(self, previous, target):
+        self._hover_phase = ''
+        self._to_map()
+        self._plan(self._ref_map()[0], self.config.hover_speed_m_s)
+        self._yaw_goal = self._yaw_ref
+
     def _tick_hover(self, target, f_n, stale):
-        if self._inspect_pending and self._time_in_mode() >= self.config.hover_settle_s:
+        cfg = self.config
+        if self._hover_phase == 'transit':
+            yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
+            if self._arrived() and abs(yaw_err) < cfg.arrive_yaw_tol_rad:
+                self._hover_phase = ''
+                self._enter(Mode.SEARCH)
+        elif self._inspect_pending and self._time_in_mode() >= cfg.hover_settle_s:
             self._inspect_pending = False
-            self._enter(Mode.SEARCH)
+            self._start_task(0)
+
+    def _enter_search(self, previous, target):
+        self._enter_hover(previous, target)
+        self._search = SearchState()
 
     def _tick_search(self, target, f_n, stale):
         cfg, search = self.config, self._search
         if self._time_in_mode() > cfg.search_timeout_s:
-            self._failsafe('target_not_found', Mode.LAND)
+            self._fail_task('target_not_found')
         elif search.phase in ('confirm', 'closer'):
             self._tick_confirm(target)
         elif self._target_usable(target) and self._now_s >= search.ignore_until_s:
@@ -405,7 +554,7 @@ class Mission:
                            cfg.climb_speed_m_s)
                 self._event('climbing to search higher')
             else:
-                self._failsafe('target_not_found', Mode.LAND)
+                self._fail_task('target_not_found')
         elif search.phase == 'climb' and self._arrived():
             search.phase, search.swept_rad = 'sweep', 0.0
 
@@ -439,6 +588,11 @@ class Mission:
         search.phase, search.ignore_until_s = search.resume_phase, self._now_s + 1.5
         self._event('candidate dropped')
 
+    def _enter_approach(self, previous, target):
+        ref_map = self._ref_map()
+        self._set_target_frame(target)
+        self._plan_t(self._standoff_t(), self.config.approach_speed_m_s, ref_map)
+
     def _tick_approach(self, target, f_n, stale):
         if self._check_target_lost():
             return
@@ -446,6 +600,15 @@ class Mission:
         yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
         if self._arrived() and abs(yaw_err) < self.config.arrive_yaw_tol_rad:
             self._enter(Mode.CONTACT)
+
+    def _enter_contact(self, previous, target):
+        cfg = self.config
+        self._contact_ticks = 0
+        self._contact_phase = 'close'
+        self._depth_correction_m = 0.0
+        self.first_touch_peak_n = 0.0
+        self._plan_t(np.array([0.0, 0.0, self.vehicle.tool_tip_x_m + cfg.touch_margin_m]),
+                     cfg.contact_speed_m_s)
 
     def _tick_contact(self, target, f_n, stale):
         cfg = self.config
@@ -455,25 +618,28 @@ class Mission:
             # once pressing, the touch point is where the wall is: the frame stays put
             self._track_target(target)
         phase = self._contact_phase
-        if phase == 'close' and self._traj.done(self._now_s):
-            self._start_touch()
-        elif phase == 'close' and f_n > cfg.touch_threshold_n:
+        if phase == 'close':
+            # as in the touch, several readings in a row: F/T noise is not the wall
+            self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.touch_threshold_n else 0
+        if phase == 'close' and self._contact_ticks >= cfg.contact_detect_ticks:
             self._start_press()      # the wall is nearer than estimated
+        elif phase == 'close' and self._traj.done(self._now_s):
+            self._start_touch()
         elif phase == 'touch':
             self.first_touch_peak_n = max(self.first_touch_peak_n, f_n)
             self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.touch_threshold_n else 0
             if self._contact_ticks >= cfg.contact_detect_ticks:
                 self._start_press()
             elif self._traj.done(self._now_s):
-                self._failsafe('no_contact', Mode.RETREAT)
+                self._fail_task('no_contact')
         elif phase == 'press':
             self.first_touch_peak_n = max(self.first_touch_peak_n, f_n)
             self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.contact_threshold_n else 0
-            # HOLD starts once the push has reached its depth, so it holds the wanted force
+            # the push holds (or slides) once it has reached its depth, so at the wanted force
             if self._contact_ticks >= cfg.contact_detect_ticks and self._traj.done(self._now_s):
-                self._enter(Mode.HOLD)
+                self._enter(Mode.SLIDE if isinstance(self.task, Slide) else Mode.HOLD)
             elif self._now_s > self._traj.t0_s + self._traj.T + cfg.press_time_s:
-                self._failsafe('no_contact', Mode.RETREAT)
+                self._fail_task('no_contact')
 
     def _start_touch(self):
         """Creep along -z_t from where the close-in ended until the F/T feels the wall."""
@@ -500,10 +666,20 @@ class Mission:
         p0, goal = np.array([0.0, 0.0, touch_z - start]), np.array([0.0, 0.0, touch_z - final])
         distance = float(np.linalg.norm(goal - p0))
         self._traj = MinJerk(self._now_s, p0, goal,
-                             max(_MIN_JERK_PEAK * distance / cfg.press_time_s, 1e-3))
+                             max(MIN_JERK_PEAK * distance / cfg.press_time_s, 1e-3))
         self._event('pressing')
 
-    def _tick_hold(self, target, f_n, stale):
+    def _enter_pushing(self, previous, target):
+        """HOLD and SLIDE: in contact from here; the record notes when the push started."""
+        self._in_contact = True
+        self._no_force_since_s = None
+        if self._plan_running():
+            self._records[self._task_index].t_contact_s = [self._now_s, None]
+            self.plan_version += 1
+
+    def _regulate_push(self, f_n):
+        """HOLD and SLIDE: the measured push trims the depth (force_tau_s), and contact
+        lost is counted."""
         cfg = self.config
         if f_n > cfg.contact_threshold_n:
             self._no_force_since_s = None
@@ -518,22 +694,79 @@ class Mission:
         elif self._in_contact and self._now_s - self._no_force_since_s > cfg.contact_lost_s:
             self._in_contact = False
             self.contact_lost += 1
+            if self._plan_running():
+                self._records[self._task_index].contact_lost += 1
+                self.plan_version += 1
             self._event('contact lost')
-        if self._time_in_mode() >= cfg.hold_time_s:
-            self._hold_completed = self.contact_lost == 0 and not self._failsafe_reason
-            self._after_retreat = Mode.LAND
-            self._enter(Mode.RETREAT, 'hold complete')
+
+    def _end_push(self, reason):
+        """HOLD or SLIDE done: record the task and back off to the standoff."""
+        self._end_task(True)
+        self._after_retreat = None
+        self._enter(Mode.RETREAT, reason)
+
+    def _tick_hold(self, target, f_n, stale):
+        self._regulate_push(f_n)
+        hold_s = self.task.hold_s if self.task is not None else self.config.hold_time_s
+        if self._time_in_mode() >= hold_s:
+            self._end_push('hold complete')
+
+    def _enter_slide(self, previous, target):
+        """The tool tip follows the task's line from where it touched, at the press depth."""
+        self._enter_pushing(previous, target)
+        cfg, task = self.config, self.task
+        depth_z = self._traj.p1[2]
+        points_t = np.array([frames.to_frame(self._R_map_t, self._origin_map, p)
+                             for p in task.points_map])
+        points_t[:, 2] = depth_z
+        self._traj = PolylineCruise(self._now_s, points_t, task.speed_m_s, cfg.slide_accel_m_s2)
+        self._slide_line_t = points_t[:, :2].copy()
+        self._event('sliding')
+
+    def _tool_t(self):
+        """base_link -> tool tip in frame t, from the odometry's attitude."""
+        x_tool_map = frames.quat_matrix(self._state.q_map_base)[:, 0]
+        return self._R_map_t.T @ x_tool_map * self.vehicle.tool_tip_x_m
+
+    def _tick_slide(self, target, f_n, stale):
+        self._regulate_push(f_n)
+        # the tool tip as odometry sees it, against the line in the wall's plane
+        p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
+        tip_t = (p_t + self._tool_t())[:2]
+        if _distance_to_polyline(tip_t, self._slide_line_t) > self.config.slide_path_tolerance_m:
+            self._fail_task('off_line')
+        elif self._traj.done(self._now_s):
+            self._end_push('line complete')
+
+    def _enter_target_lost(self, previous, target):
+        self._resume_mode = previous
+        self._plan_t(self._ref_t()[0], self.config.approach_speed_m_s)
 
     def _tick_target_lost(self, target, f_n, stale):
         cfg = self.config
         if self._target_usable(target):
             self._enter(self._resume_mode, 'target reacquired', target=target)
         elif self._now_s - self._target_seen_s > cfg.target_lost_retreat_s:
-            self._failsafe('target_lost', Mode.RETREAT)
+            self._fail_task('target_lost')
+
+    def _enter_retreat(self, previous, target):
+        self._plan_t(self._standoff_t(), self.config.approach_speed_m_s)
 
     def _tick_retreat(self, target, f_n, stale):
         if self._arrived():
-            self._enter(self._after_retreat)
+            if self._after_retreat is None:
+                self._start_task(self._task_index + 1)
+            else:
+                self._enter(self._after_retreat)
+
+    def _enter_land(self, previous, target):
+        cfg = self.config
+        self._landing_since_s = None
+        rate = cfg.descent_rate_m_s if self._mode == Mode.LAND else cfg.failsafe_descent_rate_m_s
+        p0 = self._ref_map()[0]
+        self._plan(np.array([p0[0], p0[1], cfg.ground_z_m]), rate)
+        self._yaw_goal = self._yaw_ref
+        self._pitch = 0.0
 
     def _tick_land(self, target, f_n, stale):
         cfg = self.config
@@ -544,7 +777,7 @@ class Mission:
         elif self._landing_since_s is None:
             self._landing_since_s = self._now_s
         elif self._now_s - self._landing_since_s >= cfg.land_detect_s:
-            self._success = self._hold_completed
+            self._success = self._completed
             self._enter(Mode.IDLE, 'landed')
 
     def _tick_failsafe_land(self, target, f_n, stale):
@@ -558,50 +791,19 @@ class Mission:
     # ---- helpers ----
 
     def _enter(self, mode, reason='', target=None):
-        cfg = self.config
         old, old_phase = self._mode, self.phase
         self._mode = mode
         self._t_mode_s = self._now_s
         self._event(reason, old, old_phase, target)
-        self._contact_gains = mode in (Mode.CONTACT, Mode.HOLD) or (
+        self._contact_gains = mode in (Mode.CONTACT, Mode.HOLD, Mode.SLIDE) or (
             mode == Mode.TARGET_LOST and self._contact_gains)
-        if mode == Mode.TAKEOFF:
-            p_meas = self._state.p_map
-            goal = np.array([p_meas[0], p_meas[1], cfg.takeoff_altitude_m])
-            self._to_map()
-            self._traj = MinJerk(self._now_s, p_meas, goal, cfg.climb_speed_m_s)
-        elif mode in (Mode.HOVER, Mode.SEARCH):
-            self._to_map()
-            self._plan(self._ref_map()[0], cfg.hover_speed_m_s)
-            self._yaw_goal = self._yaw_ref
-            if mode == Mode.SEARCH:
-                self._search = SearchState()
-        elif mode == Mode.APPROACH:
-            ref_map = self._ref_map()
-            self._set_target_frame(target)
-            self._plan_t(self._standoff_t(), cfg.approach_speed_m_s, ref_map)
-        elif mode == Mode.CONTACT:
-            self._contact_ticks = 0
-            self._contact_phase = 'close'
-            self._depth_correction_m = 0.0
-            self.first_touch_peak_n = 0.0
-            self._plan_t(np.array([0.0, 0.0, self.vehicle.tool_tip_x_m + cfg.touch_margin_m]),
-                         cfg.contact_speed_m_s)
-        elif mode == Mode.HOLD:
-            self._in_contact = True
-            self._no_force_since_s = None
-        elif mode == Mode.TARGET_LOST:
-            self._resume_mode = old
-            self._plan_t(self._ref_t()[0], cfg.approach_speed_m_s)
-        elif mode == Mode.RETREAT:
-            self._plan_t(self._standoff_t(), cfg.approach_speed_m_s)
-        elif mode in (Mode.LAND, Mode.FAILSAFE_LAND):
-            self._landing_since_s = None
-            rate = cfg.descent_rate_m_s if mode == Mode.LAND else cfg.failsafe_descent_rate_m_s
-            p0 = self._ref_map()[0]
-            self._plan(np.array([p0[0], p0[1], cfg.ground_z_m]), rate)
-            self._yaw_goal = self._yaw_ref
-            self._pitch = 0.0
+        if mode != Mode.CONTACT:
+            self._contact_phase = ''
+        if mode != Mode.HOVER:
+            self._hover_phase = ''
+        enter = MODES[mode].enter
+        if enter is not None:
+            enter(self, old, target)
 
     def _event(self, reason, old=None, old_phase='', target=None):
         """Log a transition from ``old`` (in ``old_phase``), or an event within a mode; with
@@ -609,24 +811,19 @@ class Mission:
         self.events.append(dict(t_s=self._now_s, mode=self._mode.value,
                                 previous=None if old is None else old.value,
                                 phase=old_phase if old is not None else self.phase,
-                                reason=reason,
+                                reason=reason, task_index=self._task_index,
                                 target_map=None if target is None else
                                 [float(v) for v in target[0]]))
 
     def _failsafe(self, reason, mode):
+        """A vehicle failsafe: the plan ends here."""
         self._failsafe_reason = reason
-        self._hold_completed = False
+        self._completed = False
         self._inspect_pending = False
+        self._stop_plan(reason)
         if mode == Mode.RETREAT:
             self._after_retreat = Mode.LAND
         self._enter(mode, reason)
-
-    def _start_inspection(self):
-        self._hold_completed = False
-        self._success = False
-        self._failsafe_reason = ''
-        self.contact_lost = 0
-        self._target_seen_s = -np.inf
 
     def _can_arm(self):
         if self._mode != Mode.IDLE:
@@ -683,7 +880,7 @@ class Mission:
         return p, v
 
     def _sample(self):
-        """(p, v, a) of the reference in frame t now, HOLD's depth correction included."""
+        """(p, v, a) of the reference in frame t now, the push's depth correction included."""
         p, v, a = self._traj.sample(self._now_s)
         p[2] -= self._depth_correction_m
         return p, v, a
@@ -737,7 +934,43 @@ class Mission:
             R_map_t=self._R_map_t.copy(), origin_map=self._origin_map.copy(),
             lambda_d_t=p, dlambda_d_t=v, ddlambda_d_t=a,
             yaw_rad=self._yaw_ref, pitch_rad=self._pitch,
-            contact_gains=self._contact_gains or releasing)
+            contact_gains=self._contact_gains or releasing,
+            tangential_feedforward=self._mode == Mode.SLIDE)
+
+
+class Handlers(typing.NamedTuple):
+    """What a mode does: ``enter(mission, previous mode, target)`` once on entry (None:
+    nothing), ``tick(mission, target, f_n, stale)`` every control tick."""
+
+    enter: typing.Callable
+    tick: typing.Callable
+
+
+# Each mode's entry and tick.
+MODES = {
+    Mode.IDLE: Handlers(None, Mission._tick_idle),
+    Mode.TAKEOFF: Handlers(Mission._enter_takeoff, Mission._tick_takeoff),
+    Mode.HOVER: Handlers(Mission._enter_hover, Mission._tick_hover),
+    Mode.SEARCH: Handlers(Mission._enter_search, Mission._tick_search),
+    Mode.APPROACH: Handlers(Mission._enter_approach, Mission._tick_approach),
+    Mode.CONTACT: Handlers(Mission._enter_contact, Mission._tick_contact),
+    Mode.HOLD: Handlers(Mission._enter_pushing, Mission._tick_hold),
+    Mode.SLIDE: Handlers(Mission._enter_slide, Mission._tick_slide),
+    Mode.TARGET_LOST: Handlers(Mission._enter_target_lost, Mission._tick_target_lost),
+    Mode.RETREAT: Handlers(Mission._enter_retreat, Mission._tick_retreat),
+    Mode.LAND: Handlers(Mission._enter_land, Mission._tick_land),
+    Mode.FAILSAFE_LAND: Handlers(Mission._enter_land, Mission._tick_failsafe_land),
+}
+
+
+def _distance_to_polyline(p, vertices):
+    """Distance from the 2-D point ``p`` to the polyline through ``vertices`` (N, 2)."""
+    best = math.inf
+    for a, b in zip(vertices[:-1], vertices[1:]):
+        d = b - a
+        u = min(max(float((p - a) @ d / (d @ d)), 0.0), 1.0)
+        best = min(best, float(np.linalg.norm(p - a - u * d)))
+    return best
 
 
 def _finite_state(state):

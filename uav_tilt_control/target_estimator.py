@@ -73,6 +73,15 @@ class TargetEstimator:
         self._p_map = self._P = self._n_map = self._stamp_s = None
         self._rejected_run = []
 
+    def aim(self, hint_map):
+        """Look for the target near ``hint_map`` (map; None: wherever vision sees one): the
+        estimate is kept only when it is within ``hint_radius_m`` of the new hint, else the
+        next fix is taken near it (a plan's next target)."""
+        self.hint_map = None if hint_map is None else np.asarray(hint_map, dtype=float).copy()
+        if self.hint_map is not None and self._p_map is not None and np.linalg.norm(
+                self._p_map - self.hint_map) > self.config.hint_radius_m:
+            self.reset()
+
     def add_state(self, state):
         """Record a vehicle state; out-of-order or non-finite states are ignored."""
         if self._history and state.t_s <= self._history[-1][0]:
@@ -243,8 +252,11 @@ class TargetEstimator:
             run.clear()
         run.append(p_map)
         if len(run) >= self.config.reacquire_n:
-            if self.locked:
-                # another object where the target was: a look-alike, never a switch
+            far_from_hint = self.hint_map is not None and np.linalg.norm(
+                p_map - self.hint_map) > self.config.hint_radius_m
+            if self.locked or far_from_hint:
+                # another object where the target was, or away from where it is said to
+                # be: a look-alike, never a switch
                 self.counters['switch_refused'] += 1
                 run.clear()
                 return

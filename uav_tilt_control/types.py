@@ -21,3 +21,6 @@ class ImpedanceSetpoint:
     yaw_rad: float = 0.0          # desired heading of x_FLU in map
     pitch_rad: float = 0.0        # held pitch (DESIGN section 2)
     contact_gains: bool = False   # True: the selective (contact) K, C; False: free flight
+    # Sliding: cancel the measured contact force along the wall (x_t, y_t), friction, and
+    # its moment about base_link; the push along z_t stays the spring of eq. (6).
+    tangential_feedforward: bool = False

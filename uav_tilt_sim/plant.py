@@ -233,8 +233,13 @@ class Plant:
             return force, torque
         tip = self.tool_tip_map()
         for c in contacts:
-            f = (c[9] * np.asarray(c[7]) + c[10] * np.asarray(c[11])
-                 + c[12] * np.asarray(c[13]))
+            normal, dir1, dir2 = np.asarray(c[7]), np.asarray(c[11]), np.asarray(c[13])
+            # The normal is reported on bodyA (the tool); the lateral friction along
+            # directions built on the pair's own normal, which is this one or its opposite
+            # depending on the pair: the triad's handedness gives the friction's sign on the
+            # tool (checked against the tool joint's reaction in test_plant).
+            hand = float(np.sign(cross3(dir1, dir2) @ normal))
+            f = c[9] * normal + hand * (c[10] * dir1 + c[12] * dir2)
             force += f
             torque += cross3(np.asarray(c[5]) - tip, f)
         R = quat_to_matrix(self.state().q_map_base)

@@ -90,8 +90,11 @@ class PlantNode(Node):
         self.pub_wrench = quiet(WrenchStamped, names.EE_WRENCH, q)
         self.pub_act = quiet(JointState, names.ACTUATORS_STATE, q)
         self.pub_gt_odom = quiet(Odometry, names.GROUND_TRUTH_ODOM, q)
-        self.pub_gt_target = self.create_publisher(PoseStamped, names.GROUND_TRUTH_TARGET,
-                                                   ros_qos.LATCHED)
+        # latched: the first target (compatibility) and each target with an id
+        self.pub_gt_targets = {
+            target_id: self.create_publisher(PoseStamped, names.ground_truth_target(target_id),
+                                             ros_qos.LATCHED)
+            for target_id in ['', *self.plant.world.targets]}
         self.pub_rgb = self.create_publisher(Image, names.CAMERA_COLOR, ros_qos.CAMERA_PUB)
         self.pub_depth = self.create_publisher(Image, names.CAMERA_DEPTH, ros_qos.CAMERA_PUB)
         self.pub_info = self.create_publisher(CameraInfo, names.CAMERA_INFO,
@@ -306,14 +309,15 @@ class PlantNode(Node):
         world = self.plant.world
         if world.target_poi_map is None:
             return
-        msg = PoseStamped()
-        msg.header.stamp = ros_msgs.to_stamp(0.0)
-        msg.header.frame_id = names.FRAME_MAP
-        p, q = msg.pose.position, msg.pose.orientation
-        p.x, p.y, p.z = (float(v) for v in world.target_poi_map)
-        q.x, q.y, q.z, q.w = (float(v) for v in
-                              Rotation.from_matrix(world.R_map_target).as_quat())
-        self.pub_gt_target.publish(msg)
+        poses = {'': (world.target_poi_map, world.R_map_target), **world.targets}
+        for target_id, (poi_map, R_map_target) in poses.items():
+            msg = PoseStamped()
+            msg.header.stamp = ros_msgs.to_stamp(0.0)
+            msg.header.frame_id = names.FRAME_MAP
+            p, q = msg.pose.position, msg.pose.orientation
+            p.x, p.y, p.z = (float(v) for v in poi_map)
+            q.x, q.y, q.z, q.w = (float(v) for v in Rotation.from_matrix(R_map_target).as_quat())
+            self.pub_gt_targets[target_id].publish(msg)
 
     def on_status(self):
         """plant/status: sim and wall time, real-time factor, lockstep counters, rejected

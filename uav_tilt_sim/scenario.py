@@ -1,6 +1,7 @@
 """Scenario files (DESIGN section 5): the world, disturbances, noise, model mismatch, seed."""
 import dataclasses
 import os
+import re
 
 from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError, load_yaml, nested, param
@@ -25,14 +26,22 @@ class WallConfig:
     friction: float = param(0.4, lo=0.0, hi=2.0)
 
 
+# A target's id names its ground-truth topic (ground_truth/targets/<id>): a ROS name token.
+TARGET_ID = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
+# Points of interest are defined for bolt plates only (uav_tilt_sim.textures.POI_UV).
+TARGET_CLASS = 'bolt_plate'
+
+
 @dataclasses.dataclass
 class ObjectConfig:
-    """An inspection object on the wall at (u right, v up) in the wall surface frame, metres."""
+    """An inspection object on the wall at (u right, v up) in the wall surface frame, metres;
+    a target (a bolt plate) may have an id, which a plan names it by."""
 
     cls: str = param('bolt_plate', choices=OBJECT_CLASSES)
     u_m: float = param(0.0, lo=-25.0, hi=25.0)
     v_m: float = param(1.5, lo=0.0, hi=20.0)
     target: bool = param(False)
+    id: str = param('')
 
 
 @dataclasses.dataclass
@@ -92,8 +101,26 @@ def load_scenario(path: str | os.PathLike[str] | None = None,
 
 
 def check_scenario(scenario: Scenario) -> Scenario:
-    """Checks across fields: at most one target object. Returns the scenario."""
-    targets = sum(o.target for o in scenario.objects)
-    if targets > 1:
-        raise ConfigError(f"parameter 'objects' has {targets} targets; at most 1 is allowed")
+    """Checks across fields: targets are bolt plates; several targets need ids, and ids are
+    unique ROS name tokens. Returns the scenario."""
+    targets = [(i, o) for i, o in enumerate(scenario.objects) if o.target]
+    for i, o in targets:
+        if o.cls != TARGET_CLASS:
+            raise ConfigError(f"parameter 'objects[{i}].cls' = {o.cls!r}: targets are "
+                              f"{TARGET_CLASS}s (their points of interest are defined)")
+    if len(targets) > 1 and not all(o.id for _, o in targets):
+        raise ConfigError(f"parameter 'objects' has {len(targets)} targets: several targets "
+                          f"need an 'id' each")
+    ids = [o.id for o in scenario.objects if o.id]
+    for i, o in enumerate(scenario.objects):
+        if o.id and not TARGET_ID.fullmatch(o.id):
+            raise ConfigError(f"parameter 'objects[{i}].id' = {o.id!r} must be a letter "
+                              f"followed by letters, digits or '_'")
+        if o.id and ids.count(o.id) > 1:
+            raise ConfigError(f"parameter 'objects[{i}].id' = {o.id!r} is not unique")
     return scenario
+
+
+def target_ids(scenario):
+    """The ids of the scenario's targets, in order."""
+    return [o.id for o in scenario.objects if o.target and o.id]

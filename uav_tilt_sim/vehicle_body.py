@@ -108,6 +108,9 @@ def create_vehicle(client: int, vehicle: VehicleParams, position_m: Vector, yaw_
         # (linear/angular damping are base-only: passing them here redirects the call)
         p.changeDynamics(body, link, localInertiaDiagonal=inertia.tolist(),
                          physicsClientId=client)
+    # Bullet multiplies the friction coefficients of a pair: 1 on the tip makes the wall's
+    # (the scenario's) the contact's.
+    p.changeDynamics(body, TOOL, lateralFriction=1.0, physicsClientId=client)
     for joint in (ARM_FRONT, ARM_REAR):
         # createMultiBody leaves the joint speed limit at 0, which freezes position motors.
         p.changeDynamics(body, joint, maxJointVelocity=50.0, physicsClientId=client)

@@ -26,6 +26,7 @@ class ObjectInstance:
     body: int
     centre_map: np.ndarray      # centre of its front face
     target: bool
+    id: str = ''
 
 
 @dataclasses.dataclass
@@ -41,6 +42,8 @@ class WorldInfo:
     wall_visual: Visual                           # the wall's textured face
     target_poi_map: np.ndarray | None = None      # point of interest on the target's face
     R_map_target: np.ndarray | None = None        # z = surface normal out of the wall
+    # id -> (poi_map, R_map_target) of every target
+    targets: dict[str, tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
 
     def body_classes(self) -> dict[int, str]:
         """PyBullet body id -> object class (for segmentation labels)."""
@@ -76,8 +79,11 @@ def build_world(client: int, scenario: Scenario, texture_rng: np.random.Generato
     for obj, cfg in zip(objects, scenario.objects):
         if cfg.target:
             du, dv = (np.asarray(textures.POI_UV[cfg.cls]) - 0.5) * textures.OBJECT_SIZE_M
-            info.target_poi_map = obj.centre_map + R[:, 0] * du - R[:, 1] * dv
-            info.R_map_target = R.copy()
+            poi = obj.centre_map + R[:, 0] * du - R[:, 1] * dv
+            if info.target_poi_map is None:
+                info.target_poi_map, info.R_map_target = poi, R.copy()
+            if cfg.id:
+                info.targets[cfg.id] = (poi, R.copy())
     return info
 
 
@@ -109,4 +115,4 @@ def _build_object(client: int, scene: Scene | None, cfg: ObjectConfig, origin: n
     face = Visual(QUAD, (half, half), texture=textures.object_texture(cfg.cls, rng))
     body = create_static_body(client, scene, face, front, quat, col)
     _set_contact(client, body, wall)
-    return ObjectInstance(cfg.cls, body, front, cfg.target)
+    return ObjectInstance(cfg.cls, body, front, cfg.target, cfg.id)

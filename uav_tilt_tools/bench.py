@@ -1,5 +1,6 @@
-"""`uav-tilt bench sim|control|vision|graph|campaign|campaign_vision|gym`: one JSON object on
-stdout (DESIGN section 7)."""
+"""`uav-tilt bench sim|control|vision|graph|campaign|campaign_vision|gym|slide`: one JSON
+object on stdout (DESIGN section 7). ``slide`` is an accuracy bench
+(uav_tilt_tools.bench_slide), not a speed one."""
 import json
 import os
 
@@ -39,9 +40,15 @@ def _gym(seconds):
     return bench_gym(seconds)
 
 
+def _slide(seconds):
+    from uav_tilt_tools.bench_slide import bench_slide
+    return bench_slide()        # each case flies its whole slide: no length to choose
+
+
 # Imported on demand: the sim bench need not load torch or the controller.
 BENCHES = {'sim': _sim, 'control': _control, 'vision': _vision, 'graph': _graph,
-           'campaign': _campaign, 'campaign_vision': _campaign_vision, 'gym': _gym}
+           'campaign': _campaign, 'campaign_vision': _campaign_vision, 'gym': _gym,
+           'slide': _slide}
 
 
 def register(sub):
@@ -50,7 +57,8 @@ def register(sub):
     parser.add_argument('what', choices=sorted(BENCHES))
     parser.add_argument('--seconds', type=float, default=None,
                         help='length of each measurement (default: 30 s control, 20 s of '
-                             'simulated time graph, the whole mission campaign*, else 10 s)')
+                             'simulated time graph, the whole mission campaign*, else 10 s; '
+                             'slide flies whole slides)')
     parser.set_defaults(func=run)
 
 
@@ -60,7 +68,7 @@ def run(args):
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
     defaults = {'sim': 10.0, 'control': 30.0, 'vision': 10.0, 'graph': 20.0,
-                'campaign': None, 'campaign_vision': None, 'gym': 10.0}
+                'campaign': None, 'campaign_vision': None, 'gym': 10.0, 'slide': 0.0}
     seconds = args.seconds if args.seconds is not None else defaults[args.what]
     print(json.dumps(BENCHES[args.what](seconds)))
     return 0

@@ -9,8 +9,12 @@ ground truth by default; ``--target-source vision`` renders the camera and runs 
 deployed detector pipeline in each run. ``--out DIR`` keeps each run as it finishes
 (:mod:`uav_tilt_tools.campaign_store`), so that ``--resume`` continues an interrupted
 campaign.
+With ``--plan FILE --scenario FILE`` each run flies the plan on the scenario's wall and
+objects, the rest of the world (seed, wind, noise, model mismatch, the wall's stiffness and
+friction) drawn as above.
 """
 import collections
+import dataclasses
 import json
 import math
 import multiprocessing
@@ -24,7 +28,7 @@ import numpy as np
 from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_tools.fly import jsonable
 from uav_tilt_common.targets import OBJECT_CLASSES
-from uav_tilt_sim.scenario import Scenario, check_scenario
+from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
 from uav_tilt_tools.campaign_ray import CampaignError, ray_runs
 
 BACKENDS = ('local', 'ray')
@@ -112,6 +116,15 @@ def _wrap_deg(angle):
     return (angle + 180.0) % 360.0 - 180.0
 
 
+def with_conditions(scenario, drawn):
+    """``scenario``'s wall and objects under the seed, wind, noise, mismatch and wall
+    contact of the drawn scenario ``drawn`` (a plan's campaign)."""
+    wall = dataclasses.replace(scenario.wall, stiffness_n_per_m=drawn.wall.stiffness_n_per_m,
+                               friction=drawn.wall.friction)
+    return dataclasses.replace(scenario, seed=drawn.seed, wall=wall, wind=drawn.wind,
+                               noise=drawn.noise, mismatch=drawn.mismatch)
+
+
 def run_one(job):
     """One campaign run (top level so that worker processes can pickle it): (the run's
     dict, the bytes of its MCAP recording when ``job['record']``, else None)."""
@@ -121,6 +134,9 @@ def run_one(job):
     overrides = site_overrides(scenario, hint) if hint is not None else {}
     with tempfile.TemporaryDirectory(prefix='uav_tilt_run_') as tmp:
         record = os.path.join(tmp, 'recording.mcap') if job['record'] else None
+        if job['plan_file']:
+            scenario = with_conditions(load_scenario(job['scenario_file']), scenario)
+            hint, overrides = None, {**site_overrides(scenario), 'plan_file': job['plan_file']}
         result = fly(scenario, job['target_source'], overrides, job['duration_s'],
                      threads=job['threads'], record=record)
         bag = None
@@ -150,18 +166,21 @@ def wilson_interval(successes, n, z=1.96):
     return low, high
 
 
-def jobs_of(n, seed, target_source='ground_truth', duration_s=DURATION_S, threads=0,
-            record=False):
+def jobs_of(n, seed, target_source='ground_truth', duration_s=None, threads=0,
+            record=False, plan_file=None, scenario_file=None):
     """The ``n`` runs of campaign ``seed``: one world seed each, by run index."""
     seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=n)
     return [dict(index=i, seed=int(s), target_source=target_source, duration_s=duration_s,
-                 threads=threads, record=record) for i, s in enumerate(seeds)]
+                 threads=threads, record=record, plan_file=plan_file,
+                 scenario_file=scenario_file) for i, s in enumerate(seeds)]
 
 
-def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=DURATION_S,
+def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=None,
              progress=True, backend='local', address=None, out=None, resume=False,
-             record=False):
-    """Run ``n`` randomised missions; returns the DESIGN section 7 JSON dict.
+             record=False, plan_file=None, scenario_file=None):
+    """Run ``n`` randomised missions (of the plan ``plan_file`` on ``scenario_file``'s
+    wall when given; ``duration_s`` None: DURATION_S per task); returns the DESIGN section
+    7 JSON dict.
 
     ``backend``: 'local' (a process pool of ``workers``, default one per core) or 'ray'
     (one Ray task per run on a local Ray of ``workers`` CPUs, or on the cluster at
@@ -184,12 +203,14 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=DUR
         runner = _local_runs
         workers = workers or min(n, cpus)
         threads = max(1, cpus // max(workers, 1))
-    jobs = jobs_of(n, seed, target_source, duration_s, threads, record)
+    jobs = jobs_of(n, seed, target_source, duration_s, threads, record, plan_file,
+                   scenario_file)
     store = None
     if out is not None:
         from uav_tilt_tools.campaign_store import RunStore
         store = RunStore(out, dict(n=n, seed=seed, target_source=target_source,
-                                   duration_s=duration_s), resume)
+                                   duration_s=duration_s, plan_file=plan_file,
+                                   scenario_file=scenario_file), resume)
     done = store.runs_of(jobs) if store is not None else {}
     todo = [job for job in jobs if job['index'] not in done]
     bar = None
@@ -273,8 +294,13 @@ def register(sub):
                         help='skip the runs DIR/runs.jsonl already holds')
     parser.add_argument('--record', action='store_true',
                         help='one MCAP per run: DIR/run_NNNN/recording.mcap')
-    parser.add_argument('--duration', type=float, default=DURATION_S,
-                        help='simulated seconds allowed per mission')
+    parser.add_argument('--duration', type=float, default=None,
+                        help=f'simulated seconds allowed per mission (default {DURATION_S:.0f}'
+                             f' per task)')
+    parser.add_argument('--plan', default=None, metavar='FILE',
+                        help='fly this inspection plan (needs --scenario) in every run')
+    parser.add_argument('--scenario', default=None, metavar='FILE',
+                        help="with --plan: the scenario whose wall and objects it names")
     parser.add_argument('--target-source', choices=('ground_truth', 'vision'),
                         default='ground_truth',
                         help='vision: render the camera and run the deployed detector')
@@ -282,10 +308,21 @@ def register(sub):
 
 
 def _run(args):
+    if bool(args.plan) != bool(args.scenario):
+        print('uav-tilt campaign: --plan and --scenario go together', file=sys.stderr)
+        return 2
+    if args.plan:
+        from uav_tilt_tools.fly import check_plan
+        try:
+            check_plan(load_scenario(args.scenario), args.plan)
+        except (OSError, ConfigError) as err:
+            print(f'uav-tilt campaign: {err}', file=sys.stderr)
+            return 2
     try:
         result = campaign(args.n, args.seed, args.workers, args.target_source, args.duration,
                           backend=args.backend, address=args.address, out=args.out,
-                          resume=args.resume, record=args.record)
+                          resume=args.resume, record=args.record, plan_file=args.plan,
+                          scenario_file=args.scenario)
     except ConfigError as err:
         print(f'uav-tilt campaign: {err}', file=sys.stderr)
         return 2

@@ -1,10 +1,13 @@
-"""`uav-tilt fly --scenario FILE`: one inspection mission in-process, its summary as JSON.
+"""`uav-tilt fly --scenario FILE [--plan FILE]`: one inspection mission (or plan)
+in-process, its summary as JSON.
 
 The same cores as the node graph (uav_tilt_tools.inprocess), with the target from the
 deployed detector on the rendered camera (``--target-source vision``, the default) or from
 ground truth. It prints the ``summary.json`` keys (DESIGN section 7) plus ``failure`` (why
-a failed run failed, and in which mode and phase) and ``mode_history``: how a user checks a
-world of their own in a minute, and what the campaign runs for each draw.
+a failed run failed, and in which mode and phase), ``mode_history`` and ``tasks`` (one entry
+per task of the plan): how a user checks a world of their own in a minute, and what the
+campaign runs for each draw. With ``--plan`` the controller's site (the wall and its target
+ids) comes from the scenario, as a survey would give it.
 """
 import json
 import sys
@@ -13,30 +16,23 @@ import time
 import numpy as np
 import yaml
 
-from uav_tilt_common.config import ConfigError, from_dict, to_flat
+from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_common.modes import Mode
-from uav_tilt_control.controller_core import ControllerConfig
+from uav_tilt_control.controller_core import ControllerConfig, plan_of
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_tools.site_params import site_overrides
 
 DURATION_S = 150.0
+__all__ = ['DURATION_S', 'check_plan', 'failure_of', 'fly', 'jsonable', 'register',
+           'site_overrides']
 
 
-def site_overrides(scenario, hint_uv_m=None):
-    """Controller parameters that give it the scenario's wall as a survey would, and the
-    hint (u, v on that wall) when there is one."""
-    wall = scenario.wall
-    out = {'site.wall_position_m': [float(v) for v in wall.position_m],
-           'site.wall_yaw_deg': float(wall.yaw_deg),
-           'site.wall_inclination_deg': float(wall.inclination_deg)}
-    if hint_uv_m is not None:
-        out['site.target_hint_uv_m'] = [float(v) for v in hint_uv_m]
-    return out
-
-
-def fly(scenario, target_source='vision', overrides=None, duration_s=DURATION_S,
-        model_path=None, threads=0, record=None):
-    """Fly the inspection mission of ``scenario``; returns the summary dict.
+def fly(scenario, target_source='vision', overrides=None, duration_s=None, model_path=None,
+        threads=0, record=None):
+    """Fly the inspection mission of ``scenario`` (the plan in ``overrides['plan_file']``
+    when given) for at most ``duration_s`` (default DURATION_S per task); returns the
+    summary dict.
 
     ``threads``: the detector's (and OpenCV's) thread pool, 0 = the libraries' defaults;
     ``record``: an MCAP path to write the flight to, as the recorder would
@@ -45,6 +41,8 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=DURATION_S,
     from uav_tilt_tools.inprocess import camera_vision, run_mission
     values = {'target_source': target_source, **(overrides or {})}
     config = from_dict(ControllerConfig, values)
+    if duration_s is None:
+        duration_s = DURATION_S * len(plan_of(config))
     plant_config, vision = PlantCoreConfig(), None
     if target_source == 'vision':
         from uav_tilt_common.resources import locate
@@ -71,11 +69,23 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=DURATION_S,
     return result
 
 
+def check_plan(scenario, plan_file, overrides=None):
+    """Validate ``plan_file`` against the site of ``scenario`` (ConfigError when bad);
+    returns the controller overrides that fly it."""
+    overrides = {**(overrides or {}), **site_overrides(scenario), 'plan_file': plan_file}
+    plan_of(from_dict(ControllerConfig, overrides))
+    return overrides
+
+
 def failure_of(result):
     """Why a run failed, as {'reason', 'mode', 'phase'}: the failsafe that ended it and
     where it fired, else what kept it from completing."""
     reason = result.get('failsafe_reason')
     where = result.get('failsafe_where') or {}
+    failed = [t for t in result.get('tasks', ()) if not t['success'] and t['reason']]
+    if not reason and failed:
+        mode = Mode.HOLD if failed[0]['kind'] == 'touch' else Mode.SLIDE
+        reason, where = failed[0]['reason'], {'mode': mode.value, 'phase': ''}
     if not reason:
         if result.get('contact_lost'):
             reason = 'contact_lost'
@@ -106,10 +116,12 @@ def register(sub):
                         help="overrides the scenario's seed (wind, noise, textures)")
     parser.add_argument('--hint', type=float, nargs=2, metavar=('U', 'V'), default=None,
                         help="roughly where the target is on the scenario's wall [m]")
+    parser.add_argument('--plan', default=None, metavar='FILE',
+                        help='an inspection plan (YAML: touch and slide tasks)')
     parser.add_argument('--set', action='append', metavar='KEY=VALUE',
                         help='a controller parameter, e.g. mission.hold_time_s=3')
-    parser.add_argument('--duration', type=float, default=DURATION_S,
-                        help='simulated seconds allowed')
+    parser.add_argument('--duration', type=float, default=None,
+                        help=f'simulated seconds allowed (default {DURATION_S:.0f} per task)')
     parser.set_defaults(func=_run)
 
 
@@ -121,7 +133,9 @@ def _run(args):
         overrides = {**_overrides(args.set)}
         if args.hint is not None:
             overrides.update(site_overrides(scenario, args.hint))
-        to_flat(from_dict(ControllerConfig, overrides))     # one clear line when bad
+        if args.plan:
+            overrides = check_plan(scenario, args.plan, overrides)
+        plan_of(from_dict(ControllerConfig, overrides))     # one clear line when bad
     except (OSError, ConfigError) as err:
         print(f'uav-tilt fly: {err}', file=sys.stderr)
         return 2

@@ -1,12 +1,14 @@
 """foxglove_bridge: a live Foxglove view of the /uav graph on ws://127.0.0.1:<port>.
 
 Streams the camera (`vision/debug_image` while vision publishes it, else the raw image),
-the scene in `map` (wall, vehicle, tool, true and seen target as a SceneUpdate, with
-FrameTransforms map -> base_link -> ee_link / camera), and force, mode and tilt as JSON
-messages for Plot and State Transitions panels. Without foxglove-sdk it logs one line and
+the scene in `map` (wall, vehicle, tool, true and seen target, the plan's slide lines and
+touch points as a SceneUpdate, with FrameTransforms map -> base_link -> ee_link / camera),
+and force, mode (with the plan's task under way and its progress) and tilt as JSON messages
+for Plot and State Transitions panels. Without foxglove-sdk it logs one line and
 exits 0, so that a launch does not fail for want of a viewer.
 """
 import dataclasses
+import json
 import sys
 import time
 
@@ -18,6 +20,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Image, JointState
+from std_msgs.msg import String
 
 from uav_tilt_common import names, ros_msgs, ros_qos
 from uav_tilt_common.config import param
@@ -52,6 +55,13 @@ class FoxgloveConfig:
     port: int = param(8765, lo=0, hi=65535)     # 0: any free port
     scenario_file: str = param('')              # the wall drawn; empty: default scenario
     rate_hz: float = param(30.0, lo=1.0, hi=300.0)   # poses and plots, in sim time
+
+
+def _float(text, default):
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        return default
 
 
 def _json_channel(topic, fields):
@@ -117,7 +127,9 @@ class FoxgloveBridge(Node):
                                                 ('fz', 'number'), ('norm', 'number')])
         self.ch_tilt = _json_channel('tilt', [('alpha_rad', 'number'), ('beta_rad', 'number')])
         self.ch_mode = _json_channel('mode', [('mode', 'string'), ('in_contact', 'boolean'),
-                                              ('success', 'boolean')])
+                                              ('success', 'boolean'), ('task', 'string'),
+                                              ('task_index', 'number'),
+                                              ('task_progress', 'number')])
         self.min_dt_ns = int(1e9 / self.cfg.rate_hz)
         self.last_ns = {}
         self.debug_image_wall = -np.inf
@@ -132,6 +144,7 @@ class FoxgloveBridge(Node):
         sub(self, Image, names.VISION_DEBUG_IMAGE, self.on_debug_image, ros_qos.CAMERA_SUB)
         sub(self, PoseStamped, names.GROUND_TRUTH_TARGET, self.on_true_target, ros_qos.LATCHED)
         sub(self, PoseWithCovarianceStamped, names.TARGET_POSE, self.on_seen_target, q)
+        sub(self, String, names.CONTROLLER_PLAN, self.on_plan, ros_qos.LATCHED)
         self.on_static()
         # Wall clock: late viewers get the scene while sim time is paused, too.
         self.create_timer(STATIC_PERIOD_S, self.on_static,
@@ -210,9 +223,32 @@ class FoxgloveBridge(Node):
         """Mission mode, contact and outcome from controller/status."""
         if msg.status:
             values = ros_msgs.diagnostics_values(msg)
+            kind, target = values.get('task_kind', ''), values.get('task_target', '')
             self.ch_mode.log(dict(mode=values.get('mode', ''),
                                   in_contact=values.get('in_contact') is True,
-                                  success=values.get('success') is True))
+                                  success=values.get('success') is True,
+                                  task=f'{kind} {target}'.strip(),
+                                  task_index=_float(values.get('task_index'), -1.0),
+                                  task_progress=_float(values.get('task_progress'), 0.0)))
+
+    def on_plan(self, msg):
+        """The plan's slide lines (blue, green once done) and touch points on the wall."""
+        try:
+            tasks = json.loads(msg.data)['tasks']
+        except (ValueError, KeyError, TypeError):
+            return
+        lines, spheres = [], []
+        for task in tasks:
+            color = _color(0.1, 0.8, 0.2) if task.get('success') else _color(0.1, 0.4, 1.0)
+            if task['kind'] == 'slide' and task.get('points_map'):
+                lines.append(fm.LinePrimitive(
+                    type=fm.LinePrimitiveLineType.LineStrip, pose=_pose((0.0, 0.0, 0.0)),
+                    thickness=0.015, color=color,
+                    points=[fm.Point3(x=p[0], y=p[1], z=p[2]) for p in task['points_map']]))
+            elif task['kind'] == 'touch' and task.get('hint_map'):
+                spheres.append(_sphere(task['hint_map'], 0.06, color))
+        self.ch_scene.log(fm.SceneUpdate(entities=[fm.SceneEntity(
+            frame_id=names.FRAME_MAP, id='plan', lines=lines, spheres=spheres)]))
 
     def on_debug_image(self, msg):
         self.debug_image_wall = time.monotonic()

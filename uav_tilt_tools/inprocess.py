@@ -15,6 +15,7 @@ from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_common.modes import Mode
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_tools.mission_metrics import mission_summary, push_along_normal
+from uav_tilt_tools.task_metrics import task_results, with_tasks
 
 
 class Flight:
@@ -41,8 +42,11 @@ class Flight:
         self.tick_s = []            # wall-clock compute time of each ControllerCore.tick
         world = self.plant.world
         if world.target_poi_map is not None:
-            self.core.on_ground_truth_target(world.target_poi_map,
-                                             Rotation.from_matrix(world.R_map_target).as_quat())
+            # as plant_node's latched ground_truth/target and ground_truth/targets/<id>
+            truths = {'': (world.target_poi_map, world.R_map_target), **world.targets}
+            for target_id, (poi_map, R_map_target) in truths.items():
+                self.core.on_ground_truth_target(
+                    poi_map, Rotation.from_matrix(R_map_target).as_quat(), target_id)
 
     @property
     def t_s(self):
@@ -67,7 +71,8 @@ class Flight:
         self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
                              push_n=self._true_push_n(sensors.in_contact),
-                             ft_force_ee_n=sensors.ee_force_n, command=command))
+                             ft_force_ee_n=sensors.ee_force_n,
+                             task_index=self.status.get('task_index', -1), command=command))
         if self.recorder is not None:
             self.recorder(self, sensors, command)
         plant.step(command)
@@ -90,19 +95,19 @@ class Flight:
         ``in_contact`` (from read_sensors, which saw the true contact force) spares the
         contact query on free-flight ticks, where the push is below 1e-6 N.
         """
-        world = self.plant.world
-        if world.R_map_target is None or not in_contact:
+        if not in_contact:
             return 0.0
         force_ee, _ = self.plant.contact_wrench_ee()
         R_map_base = quat_to_matrix(self.plant.state().q_map_base)
-        return float((R_map_base @ force_ee) @ world.R_map_target[:, 2])
+        return float((R_map_base @ force_ee) @ self.plant.world.R_map_wall[:, 2])
 
 
 def mission_result(flight):
-    """Summary of an inspection run: :func:`mission_metrics.mission_summary` of the log
-    (the F/T reading and the truth of each tick), with the failsafe reason and where it
-    fired, the history of modes, the first touch's true peak push, the target confirmed
-    for the approach and the mean tool tip over HOLD."""
+    """Summary of a plan's run: :func:`mission_metrics.mission_summary` of the log (the
+    F/T reading and the truth of each tick) with the plan's ``tasks``
+    (:func:`task_metrics.with_tasks`), the failsafe reason and where it fired, the history
+    of modes, the first touch's true peak push, the target confirmed for the approach and
+    the mean tool tip over HOLD."""
     log = flight.log
     modes = [(entry['t_s'], entry['mode']) for entry in log]
     history = [modes[0]] + [modes[i] for i in range(1, len(modes))
@@ -121,6 +126,11 @@ def mission_result(flight):
     approached = [e['target_map'] for e in events if e['mode'] == Mode.APPROACH.value
                   and e['previous'] == Mode.SEARCH.value]
     hold = [e['tip_map'] for e in log if e['mode'] == Mode.HOLD.value]
+    truths = {'': (world.target_poi_map, world.R_map_target), **world.targets} \
+        if world.target_poi_map is not None else {}
+    force_map = [quat_to_matrix(e['q_map_base']) @ e['ft_force_ee_n'] for e in log]
+    tasks = task_results(flight.core.plan_report()['tasks'], t_log,
+                         [e['tip_map'] for e in log], force_map, truths, world.R_map_wall[:, 2])
     result.update(failsafe_reason=reason,
                   failsafe_where=({'mode': fired[-1]['previous'], 'phase': fired[-1]['phase']}
                                   if fired else None),
@@ -130,7 +140,7 @@ def mission_result(flight):
                   hold_tip_map=np.mean(hold, axis=0).tolist() if hold else None,
                   confirmed_target_map=approached[0] if approached else None,
                   sim_time_s=float(flight.t_s), ticks=len(log))
-    return result
+    return with_tasks(result, tasks)
 
 
 def _first_touch_peak(log, push, window_s=0.25):
@@ -146,7 +156,8 @@ def _first_touch_peak(log, push, window_s=0.25):
 
 def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None,
                 plant_config=None, vision=None, recorder=None):
-    """Fly the inspection mission (``inspect`` at t = 0) until landed or ``duration_s``.
+    """Fly the configured plan (``inspect`` at t = 0: the one-touch inspection unless
+    ``controller_config.plan_file`` names a plan) until landed or ``duration_s``.
 
     Returns :func:`mission_result`'s dict.
     """

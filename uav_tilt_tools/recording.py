@@ -8,6 +8,7 @@ missing gives empty series, not errors. Times are sim time (header stamps) unles
 log time (when the recorder got them).
 """
 import glob
+import json
 import os
 import struct
 
@@ -26,13 +27,17 @@ from uav_tilt_tools.mission_metrics import push_along_normal
 REPORT_TOPICS = (names.CLOCK, names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
                  names.EE_WRENCH, names.ACTUATORS_STATE, names.ACTUATORS_CMD,
                  names.CONTROLLER_STATUS, names.VISION_STATUS, names.PLANT_STATUS,
-                 names.TARGET_POSE, names.CAMERA_INFO)
+                 names.TARGET_POSE, names.CAMERA_INFO, names.CONTROLLER_PLAN)
+# ... and every topic under these (each target's ground truth, by its id)
+REPORT_PREFIXES = (names.GROUND_TRUTH_TARGETS + '/',)
 # What reading a file that ends early may raise at its torn tail.
 TORN_TAIL = (McapError, EOFError, struct.error, ValueError)
 
 
-def load_recording(run_dir, namespace=names.NAMESPACE, topics=REPORT_TOPICS, notes=None):
-    """The recording of ``topics`` in every RUN_DIR/*.mcap (FileNotFoundError if none).
+def load_recording(run_dir, namespace=names.NAMESPACE, topics=REPORT_TOPICS, notes=None,
+                   prefixes=REPORT_PREFIXES):
+    """The recording of ``topics`` and of the topics under ``prefixes`` in every
+    RUN_DIR/*.mcap (FileNotFoundError if none).
 
     A file without its summary (the recorder was killed) is read up to its last complete
     chunk; one line about it goes to ``notes`` (a list) when given.
@@ -44,7 +49,7 @@ def load_recording(run_dir, namespace=names.NAMESPACE, topics=REPORT_TOPICS, not
     absolute = {t if t.startswith('/') else prefix + t: t for t in topics}
     rec = {}
     for path in paths:
-        complete, count = _read_mcap(path, absolute, rec)
+        complete, count = _read_mcap(path, absolute, (prefix, tuple(prefixes)), rec)
         if not complete and notes is not None:
             notes.append(f'{os.path.basename(path)} is incomplete (no footer: the recorder '
                          f'did not finish); read {count} messages up to its last complete '
@@ -52,8 +57,12 @@ def load_recording(run_dir, namespace=names.NAMESPACE, topics=REPORT_TOPICS, not
     return rec
 
 
-def _read_mcap(path, absolute, rec):
-    """Add the messages of one file to ``rec``; returns (complete, messages read)."""
+def _read_mcap(path, absolute, under, rec):
+    """Add the messages of one file to ``rec``: those on the topics of ``absolute``
+    (absolute name -> recording name) and, ``under`` = (namespace prefix, relative
+    prefixes), those on the namespace's topics under the prefixes. Returns (complete,
+    messages read)."""
+    namespace, prefixes = under
     count = 0
     decoders = {}
     factory = DecoderFactory()
@@ -64,7 +73,8 @@ def _read_mcap(path, absolute, rec):
             summary, complete = None, False
         stream.seek(0)
         reader = make_reader(stream) if summary is not None else NonSeekingReader(stream)
-        messages = reader.iter_messages(topics=list(absolute), log_time_order=False)
+        messages = reader.iter_messages(topics=None if prefixes else list(absolute),
+                                        log_time_order=False)
         while True:
             try:
                 schema, channel, message = next(messages)
@@ -74,9 +84,15 @@ def _read_mcap(path, absolute, rec):
                 if complete:
                     raise
                 break           # the chunk being written when the recorder died
+            name = absolute.get(channel.topic)
+            if name is None:
+                relative = channel.topic[len(namespace):]
+                if not (channel.topic.startswith(namespace) and relative.startswith(prefixes)):
+                    continue
+                name = absolute[channel.topic] = relative
             if channel.id not in decoders:
                 decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
-            rec.setdefault(absolute[channel.topic], []).append(
+            rec.setdefault(name, []).append(
                 (message.log_time, decoders[channel.id](message.data)))
             count += 1
     return complete, count
@@ -107,6 +123,38 @@ def target_pose(rec):
     """(POI position, R_map_target) of ground_truth/target, or None."""
     msgs = rec.get(names.GROUND_TRUTH_TARGET)
     return _pose(msgs[-1][1].pose) if msgs else None
+
+
+def target_poses(rec):
+    """Target id ('' = the first target) -> (POI position, R_map_target) of the ground
+    truth topics."""
+    topics = {'': names.GROUND_TRUTH_TARGET, **{
+        topic[len(names.GROUND_TRUTH_TARGETS) + 1:]: topic for topic in rec
+        if topic.startswith(names.GROUND_TRUTH_TARGETS + '/')}}
+    return {target_id: _pose(rec[topic][-1][1].pose) for target_id, topic in topics.items()
+            if rec.get(topic)}
+
+
+def plan_tasks(rec):
+    """The task entries of the last controller/plan (its JSON), or None."""
+    msgs = rec.get(names.CONTROLLER_PLAN)
+    return json.loads(msgs[-1][1].data)['tasks'] if msgs else None
+
+
+def wrench_series(rec, tool_tip_x_m):
+    """(t_s, tool tips (N, 3), F/T force on the vehicle (N, 3)) in map, of each ee_wrench
+    with the vehicle's ground-truth pose at its stamp."""
+    poses = vehicle_poses(rec)
+    t, tips, forces = [], [], []
+    for _, m in rec.get(names.EE_WRENCH, ()):
+        pose = poses.get(stamp_ns(m.header.stamp))
+        if pose is None:
+            continue
+        f = m.wrench.force
+        t.append(stamp_s(m))
+        tips.append(pose[0] + pose[1][:, 0] * tool_tip_x_m)
+        forces.append(pose[1] @ np.array([f.x, f.y, f.z]))
+    return np.array(t), np.array(tips).reshape(-1, 3), np.array(forces).reshape(-1, 3)
 
 
 def vehicle_poses(rec):

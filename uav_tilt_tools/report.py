@@ -21,9 +21,10 @@ from uav_tilt_common import names
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_tools import recording
 from uav_tilt_tools.mission_metrics import MISSION_KEYS, json_number, mission_summary
+from uav_tilt_tools.task_metrics import task_results, with_tasks
 
 RUN_KEYS = ('rtf', 'controller_rate_hz', 'vision_fps', 'vision_latency_ms_p95')
-SUMMARY_KEYS = MISSION_KEYS + RUN_KEYS
+SUMMARY_KEYS = MISSION_KEYS + RUN_KEYS + ('tasks',)
 
 
 def register(sub):
@@ -79,4 +80,18 @@ def summarize(rec, tool_tip_x_m):
         controller_rate_hz=last.get('loop_rate_hz'),
         vision_fps=vision_last.get('fps'),
         vision_latency_ms_p95=vision_last.get('latency_ms_p95'))
-    return {k: summary[k] if k in MISSION_KEYS else json_number(summary[k]) for k in SUMMARY_KEYS}
+    with_tasks(summary, task_summaries(rec, tool_tip_x_m))
+    return {k: summary[k] if k in MISSION_KEYS + ('tasks',) else json_number(summary[k])
+            for k in SUMMARY_KEYS}
+
+
+def task_summaries(rec, tool_tip_x_m):
+    """summary.json ``tasks``: the recorded plan's results (:mod:`task_metrics`, the F/T
+    force with the true attitude at its stamp, as for the mission's keys), or None without
+    a plan."""
+    tasks = recording.plan_tasks(rec)
+    if tasks is None:
+        return None
+    targets = recording.target_poses(rec)
+    normal = targets[''][1][:, 2] if '' in targets else None
+    return task_results(tasks, *recording.wrench_series(rec, tool_tip_x_m), targets, normal)

@@ -7,7 +7,7 @@ import numpy as np
 
 from uav_tilt_common import names
 from uav_tilt_common.modes import Mode
-from uav_tilt_tools import recording
+from uav_tilt_tools import recording, task_plots
 from uav_tilt_tools.mission_metrics import runs_of_mode
 
 matplotlib.use('Agg')
@@ -24,7 +24,8 @@ def write_plots(rec, out_dir, tool_tip_x_m):
              ('force.png', lambda: plot_force(rec, ctrl, hold)),
              ('actuators.png', lambda: plot_actuators(rec)),
              ('poi_error.png', lambda: plot_poi_error(rec, tool_tip_x_m, hold)),
-             ('vision.png', lambda: plot_vision(rec)))
+             ('vision.png', lambda: plot_vision(rec)),
+             ('slides.png', lambda: task_plots.plot_slides(rec, tool_tip_x_m)))
     written = []
     for name, make in plots:
         fig = make()

@@ -1,0 +1,162 @@
+"""Plan files: the shipped plan resolves on its scenario's wall; bad plans are refused at
+start with one line naming the task (index and kind) and the field; the controller takes a
+plan only with ``autostart: plan`` (or the inspect service), and ``inspect`` stays the
+one-touch plan."""
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from uav_tilt_common.config import ConfigError, from_dict
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control.controller_core import ControllerConfig, ControllerCore, plan_of
+from uav_tilt_control.mission import MissionConfig
+from uav_tilt_control.plan import Slide, Touch, load_plan, parse_plan
+from uav_tilt_control.site import SiteConfig
+from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_tools.site_params import ros_arguments, site_overrides
+
+REPO = pathlib.Path(__file__).resolve().parent.parent
+SCENARIO = REPO / 'config' / 'scenarios' / 'plan.yaml'
+PLAN = REPO / 'config' / 'plans' / 'inspection.yaml'
+FORCES = (MissionConfig().contact_threshold_n, MissionConfig().force_limit_n)
+
+
+def _site():
+    values = {k.split('.', 1)[1]: v for k, v in site_overrides(load_scenario(SCENARIO)).items()}
+    return from_dict(SiteConfig, values)
+
+
+def _touch(**fields):
+    return {'touch': {'target': 'plate_a', 'near_uv_m': [-0.4, 1.5], **fields}}
+
+
+def _slide(**fields):
+    return {'slide': {'from_uv_m': [1.3, 1.0], 'to_uv_m': [1.3, 2.0], **fields}}
+
+
+def test_the_shipped_plan_resolves_on_its_wall():
+    site = _site()
+    tasks = load_plan(PLAN, site, FORCES)
+    assert [t.kind for t in tasks] == ['touch', 'touch', 'slide']
+    assert [t.target for t in tasks[:2]] == ['plate_a', 'plate_b']
+    scenario = load_scenario(SCENARIO)
+    plates = {o.id: (o.u_m, o.v_m) for o in scenario.objects if o.id}
+    for task in tasks[:2]:
+        # the plan's prior is within the issue's +-0.3 m of the plate
+        assert np.abs(np.subtract(task.near_uv_m, plates[task.target])).max() <= 0.3
+        np.testing.assert_allclose(task.hint_map, site.point_map(task.near_uv_m))
+    slide = tasks[2]
+    assert isinstance(slide, Slide) and slide.length_m == pytest.approx(1.0)
+    # the line lies on the wall's surface: along it, normal to the normal
+    np.testing.assert_allclose(np.diff(slide.points_map, axis=0) @ slide.normal_map, 0.0,
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize('tasks, words', [
+    ([], ["'tasks'", 'at least one task']),
+    ([_touch(target='plate_c')], ['tasks[0] (touch)', "'target' = 'plate_c'", 'plate_a']),
+    ([_touch(), _slide(force_n=-5.0)], ["tasks[1].slide.force_n", '-5.0', 'range']),
+    ([_touch(force_n=15.0)], ['tasks[0] (touch)', "'force_n' = 15.0", 'force_limit_n']),
+    ([_slide(to_uv_m=[3.0, 2.0])], ['tasks[0] (slide)', "'to_uv_m' = [3.0, 2.0]",
+                                    'off the wall']),
+    ([_slide(via_uv_m=[[1.3, 1.5], [1.3, 4.0]])], ['tasks[0] (slide)', "'via_uv_m[1]'",
+                                                   'off the wall']),
+    ([_slide(speed_m_s=0.0)], ['tasks[0].slide.speed_m_s', 'range']),
+    ([_slide(to_uv_m=[1.3, 1.0])], ['tasks[0] (slide)', 'repeats']),
+    ([{'touch': {'target': 'plate_a'}}], ['tasks[0] (touch)', "'near_uv_m' is required"]),
+    ([{'drill': {}}], ['tasks[0]', 'touch', 'slide']),
+    ([_touch(hold=3.0)], ["unknown parameter 'tasks[0].touch.hold'"]),
+])
+def test_a_bad_plan_is_refused_with_one_line(tasks, words):
+    with pytest.raises(ConfigError) as err:
+        parse_plan({'tasks': tasks}, _site(), FORCES)
+    message = str(err.value)
+    assert '\n' not in message
+    for word in words:
+        assert word in message, message
+
+
+def test_a_slide_needs_the_surveyed_wall():
+    site = SiteConfig(target_ids=['plate_a'])
+    with pytest.raises(ConfigError, match=r'tasks\[0\] \(slide\).*site.wall_width_m'):
+        parse_plan({'tasks': [_slide()]}, site, FORCES)
+
+
+def _config(tmp_path, tasks, **values):
+    path = tmp_path / 'plan.yaml'
+    path.write_text(yaml.safe_dump({'tasks': tasks}))
+    data = {**site_overrides(load_scenario(SCENARIO)), 'plan_file': str(path), **values}
+    return from_dict(ControllerConfig, data)
+
+
+def test_the_controller_takes_the_plan_file_and_inspect_stays_one_touch(tmp_path):
+    core = ControllerCore(VehicleParams(), _config(tmp_path, [_touch(), _slide()],
+                                                   autostart='plan'))
+    assert [t.kind for t in core.mission.plan] == ['touch', 'slide']
+    report = core.plan_report()
+    assert [t['kind'] for t in report['tasks']] == ['touch', 'slide']
+    assert report['wall'] is not None
+    inspect = ControllerCore(VehicleParams(), ControllerConfig(contact_force=7.0))
+    (task,) = inspect.mission.plan
+    assert isinstance(task, Touch) and task.target == '' and task.hint_map is None
+    assert task.force_n == 7.0 and task.hold_s == MissionConfig().hold_time_s
+    with pytest.raises(ConfigError, match="'plan' needs 'plan_file'"):
+        plan_of(ControllerConfig(autostart='plan'))
+    with pytest.raises(ConfigError, match="autostart 'inspect' is the one-touch"):
+        plan_of(_config(tmp_path, [_touch()], autostart='inspect'))
+
+
+def test_site_arguments_keep_ids_strings():
+    words = ros_arguments({'site.target_ids': ['y', 'plate_b'], 'site.wall_yaw_deg': 5.0,
+                           'site.target_hint_uv_m': []})
+    assert words == ['-p', "site.target_ids:=['y', 'plate_b']", '-p', 'site.wall_yaw_deg:=5.0']
+
+
+def test_controller_node_stops_with_one_line_on_a_bad_plan(tmp_path):
+    """Through ROS: the site as launch.sh gives it (typed list parameters) and a plan that
+    names a target the site does not have."""
+    path = tmp_path / 'plan.yaml'
+    path.write_text(yaml.safe_dump({'tasks': [_touch(target='plate_z')]}))
+    site = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.site_params', str(SCENARIO)],
+                          capture_output=True, text=True, check=True).stdout.splitlines()
+    cmd = [sys.executable, '-m', 'uav_tilt_control.controller_node', '--ros-args',
+           '-p', 'autostart:=plan', '-p', f'plan_file:={path}', *site]
+    out = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2, out.stderr
+    fatal = [line for line in out.stderr.splitlines() if line.startswith('[FATAL]')]
+    assert len(fatal) == 1 and "'target' = 'plate_z'" in fatal[0], out.stderr
+    assert "['plate_a', 'plate_b']" in fatal[0]       # the site's ids came through ROS
+
+
+@pytest.mark.parametrize('argv, words', [
+    (['fly', '--scenario', str(SCENARIO), '--plan', '{plan}'], ['uav-tilt fly:', 'plate_z']),
+    (['campaign', '--n', '1', '--scenario', str(SCENARIO), '--plan', '{plan}'],
+     ['uav-tilt campaign:', 'plate_z']),
+    (['campaign', '--n', '1', '--plan', str(PLAN)], ['--plan and --scenario go together']),
+])
+def test_fly_and_campaign_refuse_a_bad_plan_with_one_line(tmp_path, argv, words):
+    path = tmp_path / 'plan.yaml'
+    path.write_text(yaml.safe_dump({'tasks': [_touch(target='plate_z')]}))
+    cmd = [sys.executable, '-m', 'uav_tilt_tools.cli',
+           *(a.replace('{plan}', str(path)) for a in argv)]
+    out = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and out.stdout == '', out
+    # pybullet's import prints its build time on stderr, whatever the caller does
+    lines = [line for line in out.stderr.strip().splitlines()
+             if not line.startswith('pybullet build time')]
+    assert len(lines) == 1 and all(w in lines[0] for w in words), out.stderr
+
+
+@pytest.mark.parametrize('argv, words', [
+    (['--mission', 'plan'], '--mission plan and --plan FILE go together'),
+    (['--plan', str(PLAN)], '--mission plan and --plan FILE go together'),
+    (['--mission', 'plan', '--plan', 'no_such_plan.yaml'], '--plan: no file'),
+])
+def test_launch_refuses_a_plan_without_its_mission_or_file(tmp_path, argv, words):
+    out = subprocess.run([str(REPO / 'scripts' / 'launch.sh'), *argv], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=30)
+    assert out.returncode == 2 and words in out.stderr, out.stderr

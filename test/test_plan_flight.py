@@ -1,0 +1,71 @@
+"""The shipped inspection plan in-process with vision in the loop (the nodes' cores and the
+deployed detector): two touches on two look-alike bolt plates named by id and a 1 m slide
+at 0.1 m/s with 5 N, on a vertical wall and on one inclined 20 degrees, F/T noise 0.1 N.
+Every task succeeds. Touches meet the demo's bar (tool tip within 1 cm of the point of
+interest along the surface, the push within 0.1 N mean and 0.2 N RMS of the task's force);
+the slide keeps the push within 0.3 N RMS and the tool tip within 1 cm RMS of the line;
+contact is never lost. Seeds (textures, noise) are drawn fresh and printed on failure."""
+import dataclasses
+import multiprocessing
+import os
+import pathlib
+
+import numpy as np
+import pytest
+
+from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_tools.fly import check_plan, fly
+
+REPO = pathlib.Path(__file__).resolve().parent.parent
+MODEL = REPO / 'models' / 'detector_int8.onnx'
+SCENARIO = REPO / 'config' / 'scenarios' / 'plan.yaml'
+PLAN = REPO / 'config' / 'plans' / 'inspection.yaml'
+SEEDS = np.random.default_rng().integers(0, 2**31 - 1, size=2)
+INCLINATIONS_DEG = (0.0, 20.0)
+
+pytestmark = pytest.mark.skipif(not MODEL.is_file(), reason='no committed detector weights')
+
+
+def _world(inclination_deg, seed):
+    base = load_scenario(SCENARIO)
+    assert base.noise.ft_force_n == 0.1
+    return dataclasses.replace(base, seed=int(seed), wall=dataclasses.replace(
+        base.wall, inclination_deg=inclination_deg))
+
+
+def _fly(job):
+    inclination_deg, seed = job
+    scenario = _world(inclination_deg, seed)
+    return inclination_deg, fly(scenario, 'vision', check_plan(scenario, str(PLAN)),
+                                model_path=MODEL)
+
+
+@pytest.fixture(scope='module')
+def flights():
+    """inclination -> summary of the plan's flight, the two flown side by side."""
+    jobs = list(zip(INCLINATIONS_DEG, SEEDS))
+    with multiprocessing.get_context('spawn').Pool(min(2, os.cpu_count() or 1)) as pool:
+        return dict(pool.imap_unordered(_fly, jobs))
+
+
+@pytest.mark.parametrize('inclination_deg', INCLINATIONS_DEG)
+def test_two_touches_and_a_slide_with_vision_in_the_loop(flights, inclination_deg):
+    result = flights[inclination_deg]
+    details = f'inclination {inclination_deg} deg (seeds {SEEDS.tolist()}): {result}'
+    assert result['success'], details
+    touches = [t for t in result['tasks'] if t['kind'] == 'touch']
+    slides = [t for t in result['tasks'] if t['kind'] == 'slide']
+    assert [t['target'] for t in touches] == ['plate_a', 'plate_b'] and len(slides) == 1
+    for task in result['tasks']:
+        assert task['success'] and task['contact_lost'] == 0, details
+    for task in touches:
+        assert task['poi_error_max_m'] <= 0.01, details
+        assert task['force_mean_n'] == pytest.approx(task['force_setpoint_n'], abs=0.1), details
+        assert task['force_rms_error_n'] <= 0.2, details
+    (slide,) = slides
+    assert slide['force_setpoint_n'] == 5.0
+    assert slide['force_rms_error_n'] <= 0.3, details
+    assert slide['path_rms_error_m'] <= 0.01, details
+    # the whole line, at 0.1 m/s plus the speed-up and slow-down
+    assert slide['length_m'] == pytest.approx(1.0, abs=0.01), details
+    assert 10.0 <= slide['duration_s'] <= 13.0, details

@@ -1,0 +1,57 @@
+"""Reference segments: the sliding profile is at rest at each vertex, cruises at the task's
+speed, keeps within the acceleration bound, and its p, v, a are consistent."""
+import numpy as np
+import pytest
+
+from uav_tilt_control.trajectory import Cruise, PolylineCruise
+
+DT_S = 0.002
+
+
+def _samples(segment, t0_s):
+    t = np.arange(t0_s - 0.5, t0_s + segment.T + 0.5, DT_S)
+    p, v, a = (np.array(x) for x in zip(*(segment.sample(tk) for tk in t)))
+    return t, p, v, a
+
+
+@pytest.mark.parametrize('length_m, speed, accel', [(1.0, 0.1, 0.1), (1.0, 0.2, 0.1),
+                                                    (0.05, 0.2, 0.1), (2.0, 0.5, 2.0)])
+def test_cruise_is_at_rest_at_both_ends_and_keeps_its_bounds(length_m, speed, accel):
+    p0 = np.array([0.3, -1.0, 2.0])
+    direction = np.array([1.0, 2.0, -2.0]) / 3.0
+    seg = Cruise(4.0, p0, p0 + length_m * direction, speed, accel)
+    t, p, v, a = _samples(seg, 4.0)
+    np.testing.assert_allclose(p[0], p0, atol=1e-12)
+    np.testing.assert_allclose(p[-1], seg.p1, atol=1e-12)
+    assert np.abs(v[[0, -1]]).max() == 0.0
+    speed_along = v @ direction
+    # cruises at the speed when the leg is long enough, else at the most it can reach
+    reachable = min(speed, np.sqrt(length_m * accel / 1.875))
+    assert speed_along.max() == pytest.approx(reachable, rel=1e-6)
+    assert np.linalg.norm(a, axis=1).max() <= accel * (1 + 1e-6)
+    # p integrates v and v integrates a (trapezoidal rule, smooth profile)
+    np.testing.assert_allclose(np.diff(p, axis=0), 0.5 * (v[1:] + v[:-1]) * DT_S, atol=1e-7)
+    np.testing.assert_allclose(np.diff(v, axis=0), 0.5 * (a[1:] + a[:-1]) * DT_S, atol=1e-6)
+    # the reference stays on the line
+    off = (p - p0) - np.outer((p - p0) @ direction, direction)
+    assert np.abs(off).max() < 1e-12
+    if speed_along.max() == pytest.approx(speed):
+        assert seg.T == pytest.approx(length_m / speed + 1.875 * speed / accel)
+
+
+def test_a_polyline_stops_at_each_vertex_and_reports_its_progress():
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 0.6, 0.0], [0.4, 0.6, 0.0]])
+    line = PolylineCruise(1.0, points, 0.1, 0.1)
+    assert line.length == pytest.approx(1.0)
+    first = line.legs[0]
+    p, v, _ = line.sample(first.t0_s + first.T)
+    np.testing.assert_allclose(p, points[1], atol=1e-12)
+    assert np.linalg.norm(v) < 1e-12
+    t, p, _, _ = _samples(line, 1.0)
+    progress = np.array([line.progress(tk) for tk in t])
+    assert progress[0] == 0.0 and progress[-1] == 1.0
+    assert np.all(np.diff(progress) >= -1e-12)
+    # progress is the covered length: along the first leg it is the distance from the start
+    inside = (t > 1.0) & (t < first.t0_s + first.T)
+    np.testing.assert_allclose(progress[inside], np.linalg.norm(p[inside], axis=1), atol=1e-9)
+    assert line.done(1.0 + line.T) and not line.done(1.0 + line.T - 1e-6)

@@ -1,0 +1,191 @@
+"""Inspection plans: the tasks of one flight, read from YAML, validated against the site and
+resolved into map coordinates for the mission.
+
+A plan file holds ``tasks``, a list in which each entry is one kind of task::
+
+    tasks:
+      - {touch: {target: plate_a, near_uv_m: [-0.5, 1.4], force_n: 5.0, hold_s: 5.0}}
+      - {slide: {from_uv_m: [1.2, 0.9], to_uv_m: [1.2, 1.9], speed_m_s: 0.1, force_n: 5.0}}
+
+``touch`` flies to the named target (vision picks the detection nearest ``near_uv_m``) and
+pushes with ``force_n`` for ``hold_s``; ``slide`` touches down at ``from_uv_m``, keeps the
+push while the tool tip follows the polyline ``from_uv_m``, ``via_uv_m``..., ``to_uv_m`` at
+``speed_m_s`` and lifts off at its end. Wall coordinates are the site's (u right, v up).
+Every problem is one ConfigError line naming the task (index and kind) and the field.
+"""
+import dataclasses
+
+import numpy as np
+import yaml
+
+from uav_tilt_common.config import ConfigError, from_dict, param
+
+UV_RANGE_M = 1000.0
+
+
+@dataclasses.dataclass
+class TouchTask:
+    """Push a target: its id, roughly where it is on the wall, the push and how long."""
+
+    target: str = param('')
+    near_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
+    force_n: float = param(5.0, lo=0.0, hi=20.0)
+    hold_s: float = param(5.0, lo=0.0, hi=600.0)
+
+
+@dataclasses.dataclass
+class SlideTask:
+    """Slide the tool tip along a polyline on the wall, pushing with ``force_n``."""
+
+    from_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
+    via_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, item_length=2)
+    to_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
+    speed_m_s: float = param(0.1, lo=0.005, hi=0.5)
+    force_n: float = param(5.0, lo=0.0, hi=20.0)
+
+    def points_uv(self):
+        """The polyline's vertices, from first to last."""
+        return [list(self.from_uv_m), *[list(p) for p in self.via_uv_m], list(self.to_uv_m)]
+
+
+KINDS = {'touch': TouchTask, 'slide': SlideTask}
+REQUIRED = {'touch': ('target', 'near_uv_m'), 'slide': ('from_uv_m', 'to_uv_m')}
+
+
+@dataclasses.dataclass
+class Touch:
+    """A touch resolved for the mission. ``target`` '' is the one target of an inspection;
+    ``hint_map``/``normal_map``: where it should be and the site's wall normal (None when the
+    site does not say)."""
+
+    target: str
+    hint_map: np.ndarray
+    normal_map: np.ndarray
+    force_n: float
+    hold_s: float
+    near_uv_m: list = None
+    kind = 'touch'
+
+    def describe(self):
+        """JSON-able description (controller/plan)."""
+        return dict(kind=self.kind, target=self.target, force_n=self.force_n,
+                    hold_s=self.hold_s, near_uv_m=self.near_uv_m,
+                    hint_map=_listed(self.hint_map), normal_map=_listed(self.normal_map))
+
+
+@dataclasses.dataclass
+class Slide:
+    """A slide resolved for the mission: the polyline on the site's wall (map) and its
+    outward normal."""
+
+    points_map: np.ndarray
+    normal_map: np.ndarray
+    speed_m_s: float
+    force_n: float
+    points_uv: list = None
+    kind = 'slide'
+    target = ''
+
+    @property
+    def length_m(self):
+        """Length of the polyline."""
+        return float(np.sum(np.linalg.norm(np.diff(self.points_map, axis=0), axis=1)))
+
+    def describe(self):
+        """JSON-able description (controller/plan)."""
+        return dict(kind=self.kind, target='', force_n=self.force_n, speed_m_s=self.speed_m_s,
+                    points_uv=self.points_uv, points_map=_listed(self.points_map),
+                    normal_map=_listed(self.normal_map), length_m=self.length_m)
+
+
+def _listed(array):
+    return None if array is None else np.asarray(array, dtype=float).tolist()
+
+
+def one_touch_plan(site, force_n, hold_s):
+    """Today's inspection as a plan: one touch of the target, near the site's hint if any."""
+    hint = site.target_hint_map()
+    normal = site.normal_map() if hint is not None else None
+    return [Touch('', hint, normal, float(force_n), float(hold_s),
+                  list(site.target_hint_uv_m) or None)]
+
+
+def load_plan(path, site, force_range_n):
+    """Read, validate and resolve the plan file ``path`` (see the module docstring).
+
+    ``site``: the SiteConfig the plan is checked against (target ids, wall extent);
+    ``force_range_n``: (low, high), the open range a task's push must lie in.
+    """
+    try:
+        with open(path, encoding='utf-8') as stream:
+            data = yaml.safe_load(stream)
+    except (OSError, yaml.YAMLError) as err:
+        raise ConfigError(f"plan_file '{path}': cannot be read: "
+                          f"{' '.join(str(err).split())}") from None
+    try:
+        return parse_plan(data, site, force_range_n)
+    except ConfigError as err:
+        raise ConfigError(f"plan_file '{path}': {err}") from None
+
+
+def parse_plan(data, site, force_range_n):
+    """Validate and resolve plan ``data`` (as loaded from YAML); see :func:`load_plan`."""
+    if not isinstance(data, dict) or set(data) != {'tasks'}:
+        keys = sorted(data) if isinstance(data, dict) else data
+        raise ConfigError(f"a plan is a mapping with the one key 'tasks', not {keys!r}")
+    entries = data['tasks']
+    if not isinstance(entries, list) or not entries:
+        raise ConfigError(f"'tasks' = {entries!r} is empty: a plan needs at least one task")
+    site.check()
+    return [_resolve(i, entry, site, force_range_n) for i, entry in enumerate(entries)]
+
+
+def _resolve(i, entry, site, force_range_n):
+    where = f'tasks[{i}]'
+    if not isinstance(entry, dict) or len(entry) != 1 or next(iter(entry)) not in KINDS:
+        raise ConfigError(f"{where} = {entry!r} must be one of "
+                          f"{', '.join(f'{{{k}: {{...}}}}' for k in KINDS)}")
+    kind, body = next(iter(entry.items()))
+    task = from_dict(KINDS[kind], body, f'{where}.{kind}.')
+    where = f'{where} ({kind})'
+    for name in REQUIRED[kind]:
+        if not getattr(task, name):
+            raise ConfigError(f"{where}: '{name}' is required")
+    for name in ('near_uv_m', 'from_uv_m', 'to_uv_m'):
+        value = getattr(task, name, None)
+        if value is not None and len(value) != 2:
+            raise ConfigError(f"{where}: '{name}' = {value!r} must have 2 elements (u, v)")
+    low, high = force_range_n
+    if not low < task.force_n < high:
+        raise ConfigError(f"{where}: 'force_n' = {task.force_n!r} must be in ({low}, {high}) "
+                          f"(mission.contact_threshold_n, mission.force_limit_n)")
+    if not site.wall_size_known:
+        raise ConfigError(f"{where}: the site's wall is needed (site.wall_position_m, "
+                          f"site.wall_width_m, site.wall_height_m)")
+    off = [(name, uv) for name, uv in _points_named(task) if not site.on_wall(uv)]
+    if off:
+        name, uv = off[0]
+        raise ConfigError(f"{where}: '{name}' = {uv!r} is off the wall (u in "
+                          f"[{-site.wall_width_m / 2}, {site.wall_width_m / 2}], v in "
+                          f"[0, {site.wall_height_m}] m)")
+    if kind == 'touch':
+        if task.target not in site.target_ids:
+            raise ConfigError(f"{where}: 'target' = {task.target!r} is not one of "
+                              f"site.target_ids {list(site.target_ids)!r}")
+        return Touch(task.target, site.point_map(task.near_uv_m), site.normal_map(),
+                     task.force_n, task.hold_s, list(task.near_uv_m))
+    points = task.points_uv()
+    for k in range(1, len(points)):
+        if np.allclose(points[k], points[k - 1]):
+            raise ConfigError(f"{where}: point {k} of the line {points!r} repeats the one "
+                              f"before it")
+    return Slide(np.array([site.point_map(p) for p in points]), site.normal_map(),
+                 task.speed_m_s, task.force_n, points)
+
+
+def _points_named(task):
+    if isinstance(task, TouchTask):
+        return [('near_uv_m', list(task.near_uv_m))]
+    return ([('from_uv_m', list(task.from_uv_m))]
+            + [(f'via_uv_m[{k}]', list(p)) for k, p in enumerate(task.via_uv_m)]
+            + [('to_uv_m', list(task.to_uv_m))])

@@ -1,0 +1,179 @@
+"""Reference segments of the mission: (p, v, a) of a point against time, in one frame.
+
+Every segment has ``t0_s``, its duration ``T``, its end point ``p1``, ``done(t)`` and
+``sample(t) -> (p, v, a)`` (held at ``p1`` after the end), so that the mission can swap one
+for another and lambda_d, dlambda_d and ddlambda_d stay consistent:
+
+- :class:`MinJerk`: a quintic from a point (and speed) to rest, for free flight;
+- :class:`Ramp`: constant velocity, the guarded move of a touch;
+- :class:`Cruise`: a straight line at a cruise speed with smooth speed-up and slow-down,
+  and :class:`PolylineCruise`, one Cruise per leg of a polyline (at rest at each vertex):
+  the tool tip sliding along the surface.
+"""
+import numpy as np
+
+# Shortest reference segment: bounds the accelerations of a segment that only has to
+# bring the reference velocity to rest.
+MIN_SEGMENT_S = 1.0
+# Peak speed of a minimum-jerk segment (and of the 'smootherstep' speed-up of a Cruise,
+# per unit of its mean) is 1.875 times the mean.
+MIN_JERK_PEAK = 1.875
+
+
+class MinJerk:
+    """Quintic from (p0, v0, a=0) to (p1, v=0, a=0) with peak speed about v_max."""
+
+    def __init__(self, t0_s, p0, p1, v_max, v0=np.zeros(3)):
+        self.t0_s = t0_s
+        self.p1 = np.asarray(p1, dtype=float).copy()
+        d = self.p1 - p0
+        self.T = max(MIN_JERK_PEAK * np.linalg.norm(d) / v_max, MIN_SEGMENT_S)
+        T = self.T
+        self._c = np.array([p0, v0, np.zeros(3),
+                            (20 * d - 12 * v0 * T) / (2 * T ** 3),
+                            (-30 * d + 16 * v0 * T) / (2 * T ** 4),
+                            (12 * d - 6 * v0 * T) / (2 * T ** 5)], dtype=float)
+
+    def done(self, t_s):
+        """True once the segment has reached p1."""
+        return t_s >= self.t0_s + self.T
+
+    def sample(self, t_s):
+        """(p, v, a) at ``t_s``; held at p1 after the end."""
+        if self.done(t_s):
+            return self.p1.copy(), np.zeros(3), np.zeros(3)
+        t1 = max(t_s - self.t0_s, 0.0)
+        t2 = t1 * t1
+        t3 = t2 * t1
+        # rows: d^k/dtau^k of (1, tau, ..., tau^5); one product gives p, v and a
+        p, v, a = np.array([[1.0, t1, t2, t3, t3 * t1, t3 * t2],
+                            [0.0, 1.0, 2.0 * t1, 3.0 * t2, 4.0 * t3, 5.0 * t3 * t1],
+                            [0.0, 0.0, 2.0, 6.0 * t1, 12.0 * t2, 20.0 * t3]]) @ self._c
+        return p, v, a
+
+
+class Ramp:
+    """Constant-velocity segment from p0 along ``velocity`` for at most ``duration`` s (the
+    guarded move of a touch)."""
+
+    def __init__(self, t0_s, p0, velocity, duration):
+        self.t0_s = t0_s
+        self.T = float(duration)
+        self._p0 = np.asarray(p0, dtype=float).copy()
+        self._v = np.asarray(velocity, dtype=float).copy()
+        self.p1 = self._p0 + self._v * self.T
+
+    def done(self, t_s):
+        """True once the segment has run its full length."""
+        return t_s >= self.t0_s + self.T
+
+    def sample(self, t_s):
+        """(p, v, a) at ``t_s``; held at the end point after the end."""
+        if self.done(t_s):
+            return self.p1.copy(), np.zeros(3), np.zeros(3)
+        return self._p0 + self._v * max(t_s - self.t0_s, 0.0), self._v.copy(), np.zeros(3)
+
+
+def _smootherstep(x):
+    """(s, ds/dx) of 10x^3 - 15x^4 + 6x^5 on [0, 1]: rises from 0 to 1 with zero first and
+    second derivatives at both ends."""
+    x2 = x * x
+    return x2 * x * (10.0 + x * (-15.0 + 6.0 * x)), 30.0 * x2 * (1.0 - x) ** 2
+
+
+class Cruise:
+    """From p0 to p1 on a straight line, at rest at both ends: the speed rises smoothly
+    (smootherstep, continuous acceleration) to ``speed`` with at most ``accel`` m/s^2,
+    cruises, and comes down the same way. A leg too short to reach ``speed`` cruises at the
+    highest speed it can reach."""
+
+    def __init__(self, t0_s, p0, p1, speed, accel):
+        self.t0_s = t0_s
+        self._p0 = np.asarray(p0, dtype=float).copy()
+        self.p1 = np.asarray(p1, dtype=float).copy()
+        self.length = float(np.linalg.norm(self.p1 - self._p0))
+        self._u = (self.p1 - self._p0) / self.length if self.length > 0.0 else np.zeros(3)
+        # a speed-up of duration T_a to v covers v T_a / 2 with peak acceleration
+        # 1.875 v / T_a (as a min-jerk segment's peak speed)
+        speed = min(float(speed), float(np.sqrt(self.length * accel / MIN_JERK_PEAK)))
+        self.speed = speed
+        self._t_ramp = MIN_JERK_PEAK * speed / accel if speed > 0.0 else 0.0
+        cruise = self.length / speed - self._t_ramp if speed > 0.0 else 0.0
+        self.T = 2.0 * self._t_ramp + max(cruise, 0.0)
+
+    def done(self, t_s):
+        """True once the leg has reached p1."""
+        return t_s >= self.t0_s + self.T
+
+    def distance(self, t_s):
+        """(s, ds/dt, d2s/dt2) along the leg at ``t_s``."""
+        t = min(max(t_s - self.t0_s, 0.0), self.T)
+        v, ramp = self.speed, self._t_ramp
+        if ramp <= 0.0:
+            return 0.0, 0.0, 0.0
+        if t < ramp:
+            rise, slope = _smootherstep(t / ramp)
+            return v * ramp * _integral_smootherstep(t / ramp), v * rise, v * slope / ramp
+        if t > self.T - ramp:
+            rise, slope = _smootherstep((self.T - t) / ramp)
+            return (self.length - v * ramp * _integral_smootherstep((self.T - t) / ramp),
+                    v * rise, -v * slope / ramp)
+        return v * ramp / 2.0 + v * (t - ramp), v, 0.0
+
+    def sample(self, t_s):
+        """(p, v, a) at ``t_s``; held at p1 after the end."""
+        if self.done(t_s):
+            return self.p1.copy(), np.zeros(3), np.zeros(3)
+        s, ds, dds = self.distance(t_s)
+        return self._p0 + self._u * s, self._u * ds, self._u * dds
+
+
+def _integral_smootherstep(x):
+    """The integral of the smootherstep from 0 to x (1/2 at x = 1)."""
+    x2 = x * x
+    return x2 * x2 * (2.5 + x * (-3.0 + x))
+
+
+class PolylineCruise:
+    """A :class:`Cruise` along each leg of a polyline, one after the other, at rest at each
+    vertex (a corner taken at speed would need an unbounded acceleration)."""
+
+    def __init__(self, t0_s, points, speed, accel):
+        points = np.asarray(points, dtype=float)
+        self.t0_s = t0_s
+        self.legs = []
+        t = t0_s
+        for p0, p1 in zip(points[:-1], points[1:]):
+            leg = Cruise(t, p0, p1, speed, accel)
+            self.legs.append(leg)
+            t += leg.T
+        self.T = t - t0_s
+        self.p1 = points[-1].copy()
+        self.length = float(sum(leg.length for leg in self.legs))
+
+    def done(self, t_s):
+        """True once the last leg has ended."""
+        return t_s >= self.t0_s + self.T
+
+    def _leg(self, t_s):
+        for leg in self.legs:
+            if t_s < leg.t0_s + leg.T:
+                return leg
+        return self.legs[-1]
+
+    def sample(self, t_s):
+        """(p, v, a) at ``t_s``; held at the last point after the end."""
+        if self.done(t_s):
+            return self.p1.copy(), np.zeros(3), np.zeros(3)
+        return self._leg(t_s).sample(t_s)
+
+    def progress(self, t_s):
+        """Fraction of the polyline's length covered by the reference at ``t_s``."""
+        if self.length <= 0.0 or self.done(t_s):
+            return 1.0
+        covered = 0.0
+        for leg in self.legs:
+            if t_s < leg.t0_s + leg.T:
+                return (covered + leg.distance(t_s)[0]) / self.length
+            covered += leg.length
+        return 1.0

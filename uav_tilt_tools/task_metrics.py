@@ -1,0 +1,154 @@
+"""Per-task results of a plan (summary.json ``tasks``), from the truth of a flight.
+
+One place for both the in-process summary (uav_tilt_tools.inprocess) and the report of a
+recording (uav_tilt_tools.report). Inputs are plain arrays on one time base: the tool tip
+(map) and the contact force on the vehicle (map), with the plan as ``controller/plan``
+carries it (each task's description and its TaskRecord: kind, success, reason,
+contact_lost, t_contact_s = [start, end] of HOLD or SLIDE, ...).
+
+- touch: over the hold, the tool tip's distance from the target's point of interest along
+  the surface (``poi_error_m``, ``poi_error_max_m``), the push's mean and RMS error against
+  the task's force;
+- slide: over the slide, the push's RMS error, the tool tip's distance from the requested
+  line in the wall's plane (``path_rms_error_m``, ``path_max_error_m``), the length of line
+  it covered (``length_m``) and the time it took (``duration_s``).
+
+The push is the contact force along the wall's outward normal (positive pushing).
+"""
+import numpy as np
+
+from uav_tilt_control import frames
+
+
+def task_results(tasks, t_s, tip_map, force_map, targets=None, wall_normal_map=None):
+    """One dict per task.
+
+    ``tasks``: controller/plan's task entries; ``t_s`` (N,), ``tip_map`` (N, 3),
+    ``force_map`` (N, 3): the truth on one time base; ``targets``: target id ('' = the
+    first target) -> (poi_map, R_map_target) of the truth; ``wall_normal_map``: the true
+    outward normal of the wall (None: the plan's, i.e. the site's).
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    tip_map = np.asarray(tip_map, dtype=float).reshape(-1, 3)
+    force_map = np.asarray(force_map, dtype=float).reshape(-1, 3)
+    out = []
+    for task in tasks:
+        entry = dict(index=task.get('index'), kind=task['kind'],
+                     success=task.get('success') is True, reason=task.get('reason') or '',
+                     contact_lost=int(task.get('contact_lost') or 0),
+                     force_setpoint_n=task.get('force_n'))
+        mask = pushing(task, t_s)
+        if task['kind'] == 'touch':
+            entry.update(target=task.get('target', ''),
+                         **_touch(task, t_s[mask], tip_map[mask], force_map[mask],
+                                  (targets or {}).get(task.get('target', '')), wall_normal_map))
+        else:
+            normal = _normal(task, wall_normal_map)
+            entry.update(_slide(task, t_s[mask], tip_map[mask], force_map[mask] @ normal,
+                                normal))
+        out.append(entry)
+    return out
+
+
+def pushing(task, t_s):
+    """Samples of the task's HOLD or SLIDE: start <= t < end (the end of the data while it
+    had not ended)."""
+    window = task.get('t_contact_s')
+    if not window or window[0] is None:
+        return np.zeros(t_s.shape, dtype=bool)
+    end = np.inf if window[1] is None else window[1]
+    return (t_s >= window[0]) & (t_s < end)
+
+
+def _normal(task, wall_normal_map):
+    normal = wall_normal_map if wall_normal_map is not None else task.get('normal_map')
+    return frames.unit(normal if normal is not None else [0.0, 0.0, 1.0])
+
+
+def _force_stats(push, force_n):
+    if not len(push):
+        return dict(force_mean_n=None, force_rms_error_n=None)
+    return dict(force_mean_n=float(push.mean()),
+                force_rms_error_n=float(np.sqrt(np.mean((push - force_n) ** 2))))
+
+
+def _touch(task, t_s, tips, forces, truth, wall_normal_map):
+    out = dict(poi_error_m=None, poi_error_max_m=None, hold_time_s=0.0, hold_tip_map=None,
+               **_force_stats(np.zeros(0), 0.0))
+    if truth is not None:
+        normal = truth[1][:, 2]
+    else:
+        normal = _normal(task, wall_normal_map)
+    if not len(t_s):
+        return out
+    out.update(_force_stats(forces @ normal, task['force_n']),
+               hold_time_s=float(t_s[-1] - t_s[0]),
+               hold_tip_map=tips.mean(axis=0).tolist())
+    if truth is not None:
+        # along the surface: a wall that gives way lets the tip sink in along the normal
+        offsets = tips - truth[0]
+        errors = np.linalg.norm(offsets - np.outer(offsets @ normal, normal), axis=1)
+        out.update(poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()))
+    return out
+
+
+def slide_geometry(task, tips, normal):
+    """(distance from the line in the wall's plane, arc length of the nearest point of the
+    line, tips in wall coordinates (u, v)) of each tool tip (N, 3) for slide ``task``."""
+    points = np.asarray(task['points_map'], dtype=float)
+    flat = np.eye(3) - np.outer(normal, normal)
+    # the line's own frame: x along the wall (horizontal), y up it, as the wall's (u, v)
+    R, origin = frames.target_frame_from_normal(points[0], normal)
+    uv0 = np.asarray(task.get('points_uv') or [[0.0, 0.0]], dtype=float)[0]
+    tips = np.asarray(tips, dtype=float).reshape(-1, 3)
+    distance = np.full(len(tips), np.inf)
+    along = np.zeros(len(tips))
+    covered = 0.0
+    for a, b in zip(points[:-1], points[1:]):
+        d = flat @ (b - a)
+        length = float(np.linalg.norm(d))
+        rel = (tips - a) @ flat
+        u = np.clip(rel @ d / (length * length), 0.0, 1.0)
+        dist = np.linalg.norm(rel - np.outer(u, d), axis=1)
+        nearer = dist < distance
+        distance[nearer] = dist[nearer]
+        along[nearer] = covered + u[nearer] * length
+        covered += length
+    uv = uv0 + ((tips - origin) @ R)[:, :2]
+    return distance, along, uv
+
+
+def line_uv(task, normal):
+    """The requested line's vertices in the wall coordinates of :func:`slide_geometry`."""
+    points = np.asarray(task['points_map'], dtype=float)
+    return slide_geometry(task, points, normal)[2]
+
+
+def _slide(task, t_s, tips, push, normal):
+    out = dict(path_rms_error_m=None, path_max_error_m=None, length_m=0.0, duration_s=0.0,
+               line_length_m=task.get('length_m'), **_force_stats(push, task['force_n']))
+    if not len(t_s):
+        return out
+    distance, along, _ = slide_geometry(task, tips, normal)
+    out.update(path_rms_error_m=float(np.sqrt(np.mean(distance ** 2))),
+               path_max_error_m=float(distance.max()),
+               length_m=float(along[-1] - along[0]), duration_s=float(t_s[-1] - t_s[0]))
+    return out
+
+
+# The first touch's keys that summary.json also has at its top level (mission_metrics).
+FIRST_TOUCH_KEYS = ('poi_error_m', 'poi_error_max_m', 'force_setpoint_n', 'force_mean_n',
+                    'force_rms_error_n', 'hold_time_s', 'hold_tip_map')
+
+
+def with_tasks(summary, tasks):
+    """``summary`` (a mission_metrics summary) with the plan's ``tasks`` (None: no plan
+    recorded) and, for a plan of more than one task, its touch keys from the first touch
+    alone: over every HOLD they would mix targets and setpoints. Returns ``summary``."""
+    summary['tasks'] = tasks
+    if tasks and len(tasks) > 1:
+        touches = [task for task in tasks if task['kind'] == 'touch']
+        for key in FIRST_TOUCH_KEYS:
+            if key in summary:
+                summary[key] = touches[0].get(key) if touches else None
+    return summary
