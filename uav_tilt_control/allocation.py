@@ -45,7 +45,7 @@ class AllocationResult:
 class Allocator:
     """Maps a body force (x_FLU, z_FLU) and torque (FLU) to four thrusts and alpha = beta."""
 
-    def __init__(self, vehicle: VehicleParams, config: AllocationConfig = None):
+    def __init__(self, vehicle: VehicleParams, config: AllocationConfig | None = None):
         self.vehicle = vehicle
         self.config = config or AllocationConfig()
 

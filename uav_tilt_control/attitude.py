@@ -59,7 +59,7 @@ class AttitudePid:
     that is clamped and frozen while the output saturates (anti-windup).
     """
 
-    def __init__(self, inertia_kgm2, config: AttitudeConfig = None):
+    def __init__(self, inertia_kgm2, config: AttitudeConfig | None = None):
         self.config = config or AttitudeConfig()
         self.inertia = np.asarray(inertia_kgm2, dtype=float)
         # Per-axis gains as float lists once: the tick runs on plain floats, as numpy's

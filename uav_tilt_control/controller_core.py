@@ -65,7 +65,7 @@ def plan_of(cfg):
 class ControllerCore:
     """Owns FlightCore, Mission and TargetEstimator; feed it messages, call :meth:`tick`."""
 
-    def __init__(self, vehicle: VehicleParams, config: ControllerConfig = None):
+    def __init__(self, vehicle: VehicleParams, config: ControllerConfig | None = None):
         self.vehicle = vehicle
         self.config = config or ControllerConfig()
         cfg = self.config
@@ -77,10 +77,11 @@ class ControllerCore:
         self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z,
                                drop_target=self.estimator.reset, plan=plan_of(cfg),
                                on_task=self._on_task)
-        self._odom = None
-        self._R_map_base = None     # of the odometry, computed on first use
-        self._q_blind = None
-        self._ground_truths = {}    # target id ('' = the target) -> (p_map, R_map_t)
+        self._odom: VehicleState | None = None
+        self._R_map_base: np.ndarray | None = None  # of the odometry, on first use
+        self._q_blind: np.ndarray | None = None
+        # target id ('' = the target) -> (p_map, R_map_t)
+        self._ground_truths: dict[str, tuple] = {}
         self._truth_id = ''         # the target of the task under way
         self._f_contact_map = np.zeros(3)
         self._autostarted = False

@@ -33,7 +33,7 @@ class DisturbanceConfig:
 class DisturbanceObserver:
     """Estimates F_ext [N, map]; call :meth:`update` every tick, read :attr:`f_ext_map`."""
 
-    def __init__(self, mass_kg, thrust_tau_s, config: DisturbanceConfig = None):
+    def __init__(self, mass_kg, thrust_tau_s, config: DisturbanceConfig | None = None):
         self.config = config or DisturbanceConfig()
         self.mass_kg = float(mass_kg)
         self.thrust_tau_s = float(thrust_tau_s)

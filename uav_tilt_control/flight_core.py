@@ -35,7 +35,7 @@ class FlightCoreConfig:
 class FlightCore:
     """Pure control core: its only state is the filters and integrators of its parts."""
 
-    def __init__(self, vehicle: VehicleParams, config: FlightCoreConfig = None):
+    def __init__(self, vehicle: VehicleParams, config: FlightCoreConfig | None = None):
         self.vehicle = vehicle
         self.config = config or FlightCoreConfig()
         self.impedance = ImpedanceController(vehicle.mass_kg, self.config.impedance)

@@ -81,7 +81,7 @@ def contact_depth_for_force(force_n, k_z_n_m):
 class ImpedanceController:
     """Computes the thrust force F_p (map frame) from the impedance law in frame t."""
 
-    def __init__(self, mass_kg, config: ImpedanceConfig = None):
+    def __init__(self, mass_kg, config: ImpedanceConfig | None = None):
         self.mass_kg = float(mass_kg)
         self.config = config or ImpedanceConfig()
         # the configuration is fixed once built, so the gains are too

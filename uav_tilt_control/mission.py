@@ -122,12 +122,12 @@ class TaskRecord:
 
     kind: str
     target: str
-    success: bool = None
+    success: bool | None = None
     reason: str = ''
     contact_lost: int = 0
-    t_start_s: float = None
-    t_end_s: float = None
-    t_contact_s: list = None      # [start, end] of HOLD or SLIDE
+    t_start_s: float | None = None
+    t_end_s: float | None = None
+    t_contact_s: list | None = None      # [start, end] of HOLD or SLIDE
 
     def outcome(self):
         """'ok', the failure reason, or '' while not ended."""
@@ -942,7 +942,7 @@ class Handlers(typing.NamedTuple):
     """What a mode does: ``enter(mission, previous mode, target)`` once on entry (None:
     nothing), ``tick(mission, target, f_n, stale)`` every control tick."""
 
-    enter: typing.Callable
+    enter: typing.Callable | None
     tick: typing.Callable
 
 

@@ -63,7 +63,7 @@ class Touch:
     normal_map: np.ndarray
     force_n: float
     hold_s: float
-    near_uv_m: list = None
+    near_uv_m: list | None = None
     kind = 'touch'
 
     def describe(self):
@@ -82,7 +82,7 @@ class Slide:
     normal_map: np.ndarray
     speed_m_s: float
     force_n: float
-    points_uv: list = None
+    points_uv: list | None = None
     kind = 'slide'
     target = ''
 

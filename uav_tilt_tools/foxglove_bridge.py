@@ -37,7 +37,7 @@ try:
     from foxglove import messages as fm
     from foxglove.websocket import Capability
 except ImportError:
-    foxglove = None
+    foxglove = None     # type: ignore[assignment]
 
 # Only local viewers: the stream is unauthenticated.
 HOST = '127.0.0.1'
