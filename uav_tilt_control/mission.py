@@ -594,11 +594,14 @@ class Mission:
         self._plan_t(self._standoff_t(), self.config.approach_speed_m_s, ref_map)
 
     def _tick_approach(self, target, f_n, stale):
-        if self._check_target_lost():
-            return
+        # On the way to the standoff the target may leave the view (a wall seen at an angle,
+        # the turn to face it, a grazing look the detector misses): it is static and its
+        # estimate locked, so the segment goes on. It is lost only if the vehicle, at the
+        # standoff and facing it, still does not see it.
         self._track_target(target)
         yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
-        if self._arrived() and abs(yaw_err) < self.config.arrive_yaw_tol_rad:
+        if self._arrived() and abs(yaw_err) < self.config.arrive_yaw_tol_rad \
+                and not self._check_target_lost():
             self._enter(Mode.CONTACT)
 
     def _enter_contact(self, previous, target):
@@ -744,9 +747,12 @@ class Mission:
 
     def _tick_target_lost(self, target, f_n, stale):
         cfg = self.config
+        # lost since the last sight, or (lost on the way, see _tick_approach) since the
+        # standoff: the vehicle gets the same wait there to find it again
+        lost_since = max(self._target_seen_s, self._t_mode_s - cfg.target_lost_hold_s)
         if self._target_usable(target):
             self._enter(self._resume_mode, 'target reacquired', target=target)
-        elif self._now_s - self._target_seen_s > cfg.target_lost_retreat_s:
+        elif self._now_s - lost_since > cfg.target_lost_retreat_s:
             self._fail_task('target_lost')
 
     def _enter_retreat(self, previous, target):
