@@ -132,8 +132,9 @@ def mission_result(flight):
     tasks = task_results(flight.core.plan_report()['tasks'], t_log,
                          [e['tip_map'] for e in log], force_map, truths, world.R_map_wall[:, 2])
     result.update(failsafe_reason=reason,
-                  failsafe_where=({'mode': fired[-1]['previous'], 'phase': fired[-1]['phase']}
-                                  if fired else None),
+                  # a transition's event names the mode it left, one within a mode the mode
+                  failsafe_where=({'mode': fired[-1]['previous'] or fired[-1]['mode'],
+                                   'phase': fired[-1]['phase']} if fired else None),
                   first_touch_peak_n=_first_touch_peak(log, np.array([e['push_n']
                                                                       for e in log])),
                   mode_history=[(float(t), m) for t, m in history],
