@@ -15,7 +15,9 @@ from uav_tilt_tools import campaign as cp
 from uav_tilt_tools import recording
 from uav_tilt_tools.campaign_store import RUNS_FILE, RESULT_FILE, BAG_NAME, run_dir
 
-N, SEED, DURATION_S = 4, 7, 8.0
+# Enough runs that some are still flying when the first is kept, however fast they fly
+# (8 s of sim time takes 1-4 s here).
+N, SEED, DURATION_S = 8, 7, 8.0
 
 
 def _cli(*args):
