@@ -33,8 +33,11 @@ def _lines(out):
 def test_interrupted_campaign_resumes_with_every_run_once(tmp_path):
     out = str(tmp_path / 'campaign')
     # Ctrl-C as a terminal sends it: to the process group, once the first run is kept
+    # (a terminal's foreground job has SIGINT at its default even when these tests run as a
+    # background job, which starts with it ignored)
     proc = subprocess.Popen(_cli('--out', out), process_group=0, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     runs_path = os.path.join(out, RUNS_FILE)
     deadline = time.monotonic() + 120.0
     while time.monotonic() < deadline and proc.poll() is None:
