@@ -299,8 +299,9 @@ class PlantNode(Node):
     def _publish_frame(self, t_s, rgb, depth):
         stamp = ros_msgs.to_stamp(t_s)
         # serialized: rclpy would take longer over each image than the renderer
-        self.pub_rgb.publish(ros_msgs.image_cdr(rgb, ros_msgs.stamp_ns(stamp)))
-        self.pub_depth.publish(ros_msgs.image_cdr(depth, ros_msgs.stamp_ns(stamp)))
+        stamp_ns = ros_msgs.stamp_ns(stamp)
+        self.pub_rgb.publish(ros_msgs.image_cdr(rgb, stamp_ns))
+        self.pub_depth.publish(ros_msgs.image_cdr(depth, stamp_ns))
         # camera_info last: sent ahead of the two large writes, it was the sample a loaded
         # recorder lost (and got again only at the writer's next heartbeat, seconds later)
         self.pub_info.publish(ros_msgs.camera_info_msg(self.cfg.camera, stamp))
