@@ -138,13 +138,54 @@ def test_redetects_on_the_frame_the_track_is_lost():
         blank = np.full_like(rgb, 128)
         detector.seg = np.full_like(detector.seg, -1)
         lost = pipeline.process(blank, depth, 0.1)
-        assert lost.detected and not lost.found and detector.calls == 2
+        # the whole frame, then the magnified tile around the box lost
+        assert lost.detected and not lost.found and detector.calls == 3
         # Nothing to track: the next frame is detected again, and the target comes back.
         detector.seg = plant.render(segmentation=True)[2]
         back = pipeline.process(rgb, depth, 0.2)
-        assert back.detected and back.found and detector.calls == 3
+        assert back.detected and back.found and detector.calls == 4
     finally:
         plant.close()
+
+
+class SmallBlindDetector:
+    """Detector stub that, like the CNN, misses objects under ``min_side_px``: it boxes the
+    red squares of the image it is given (whatever its scale) when large enough."""
+
+    def __init__(self, min_side_px):
+        self.min_side_px = min_side_px
+
+    def predict(self, rgb, conf_thres=0.25, iou_thres=0.45):
+        red = (rgb[..., 0] > 200) & (rgb[..., 1] < 60)
+        ys, xs = np.nonzero(red)
+        if len(xs) == 0 or min(xs.max() - xs.min(), ys.max() - ys.min()) + 1 < self.min_side_px:
+            return np.zeros((0, 6), np.float32)
+        return np.array([[xs.min(), ys.min(), xs.max() + 1, ys.max() + 1, 0.9, TARGET_CLASS]],
+                        np.float32)
+
+
+@pytest.mark.parametrize('zoom', [2.0, 3.0])
+def test_a_target_too_small_for_the_detector_is_found_in_a_magnified_tile(zoom):
+    rng = np.random.default_rng()
+    w, h, side = 320, 240, 12
+    K = CameraIntrinsics(277.0, 277.0, w / 2, h / 2, w, h)
+    depth = np.full((h, w), 5.0, np.float32)
+    detector = SmallBlindDetector(min_side_px=20)
+    n_tiles = (int(np.ceil(2 * zoom)) - 1) ** 2
+    for _ in range(4):
+        rgb = np.full((h, w, 3), 120, np.uint8)
+        x0, y0 = int(rng.integers(0, w - side)), int(rng.integers(0, h - side))
+        rgb[y0:y0 + side, x0:x0 + side] = (230, 20, 20)
+        assert not len(detector.predict(rgb))
+        pipeline = VisionPipeline(detector, K, VisionConfig(detect_every=1, zoom=zoom))
+        # every frame without a box looks at the next tile: one of a grid's tiles has it
+        found = [pipeline.process(rgb, depth, k / 30.0).box_xyxy for k in range(n_tiles)]
+        boxes = [b for b in found if b is not None]
+        assert boxes, (zoom, x0, y0)
+        # in the frame's pixels, to a pixel of the magnified tile's
+        assert np.allclose(boxes[0], [x0, y0, x0 + side, y0 + side], atol=1.0 / zoom + 0.5)
+        off = VisionPipeline(detector, K, VisionConfig(detect_every=1, zoom=1.0))
+        assert all(off.process(rgb, depth, k / 30.0).box_xyxy is None for k in range(n_tiles))
 
 
 def test_without_a_detector_every_frame_is_no_target():

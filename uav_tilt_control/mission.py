@@ -139,6 +139,15 @@ class TaskRecord:
 SEARCH_LEVELS = 2      # full turns: at the takeoff altitude, then search_climb_m higher
 
 
+class TargetFrame(typing.NamedTuple):
+    """The target frame t built from one target estimate (the estimate is its key)."""
+
+    key: tuple
+    R_map_t: np.ndarray
+    origin_map: np.ndarray
+    pitch_rad: float        # the body pitch that points the tool along -z_t
+
+
 class SearchState:
     """Where SEARCH is: its phase, the turn swept so far, the candidate being confirmed."""
 
@@ -213,7 +222,7 @@ class Mission:
         self._odom_age_s = np.inf
         self._R_map_t = np.eye(3)
         self._origin_map = np.zeros(3)
-        self._target_frame = (None, None)   # (target key, (R_map_t, origin_map, pitch))
+        self._target_frame = None       # TargetFrame of the last estimate used
         self._traj = None
         self._yaw_ref = 0.0
         self._yaw_goal = 0.0
@@ -859,11 +868,14 @@ class Mission:
         p_poi, n_map = target[0], target[1]
         # tracked every tick, so the frame is rebuilt only when the estimate moves
         key = tuple(np.concatenate((p_poi, n_map)).tolist())
-        if key != self._target_frame[0]:
+        if self._target_frame is None or key != self._target_frame.key:
             pitch = frames.pitch_facing(n_map) if cfg.pitch_to_normal else 0.0
             pitch = min(max(pitch, -cfg.max_pitch_rad), cfg.max_pitch_rad)
-            self._target_frame = (key, (*frames.target_frame_from_normal(p_poi, n_map), pitch))
-        self._R_map_t, self._origin_map, self._pitch = self._target_frame[1]
+            self._target_frame = TargetFrame(
+                key, *frames.target_frame_from_normal(p_poi, n_map), pitch)
+        frame = self._target_frame
+        self._R_map_t, self._origin_map = frame.R_map_t, frame.origin_map
+        self._pitch = frame.pitch_rad
         self._yaw_goal = frames.yaw_facing(n_map, default_rad=self._yaw_ref)
 
     def _track_target(self, target):

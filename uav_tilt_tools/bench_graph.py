@@ -4,7 +4,8 @@ The graph is what ``scripts/launch.sh --mission inspect`` starts (plant, control
 the mission watcher; no recorder), with vision in the loop: the camera at its default 30 Hz
 and 320x240, the controller's target from vision. First in lockstep, then with
 ``--realtime`` (real-time scheduling included where permitted), each for ``sim_s`` of
-simulated time measured after the first second (start-up and discovery excluded). Rates
+simulated time measured once a second is simulated and vision has processed frames
+(start-up, discovery and the detector's loading excluded). Rates
 are per second of wall time; ``cpu_s_per_sim_s`` is each node's CPU time (user + system,
 all threads, from /proc/<pid>/stat) per simulated second.
 """
@@ -88,8 +89,10 @@ def run_graph(mode, sim_s):
             rclpy.spin_once(node, timeout_sec=0.02)
 
     try:
-        spin_until(lambda: float(plant_status.get('sim_time_s', 0.0)) >= WARM_UP_S,
-                   START_TIMEOUT_S)
+        # up: a second simulated, and vision through its first frames (its model loads
+        # while the plant and controller fly already)
+        spin_until(lambda: float(plant_status.get('sim_time_s', 0.0)) >= WARM_UP_S
+                   and poses[0] > 0 and 'latency_ms_p95' in vision, START_TIMEOUT_S)
         procs.update(node_pids(launch.pid))
         if set(procs) != set(NODES):
             raise RuntimeError(f'bench graph ({mode}): nodes {sorted(procs)} found')

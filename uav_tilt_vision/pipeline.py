@@ -3,7 +3,8 @@
 Every ``detect_every`` frames (and whenever the track is lost or its quality drops) the
 CNN detector runs; of its target-class boxes the one that continues the track (the best
 overlap with the tracked box) is tracked on, else the highest-scoring one; in between,
-the KLT tracker carries that box. Inside each box the POI (bolt head) is found by
+the KLT tracker carries that box. A frame without one is looked at again through a
+magnified tile (a far target is a dozen pixels). Inside each box the POI (bolt head) is found by
 morphology, and the depth image around it gives the 3D point, the surface normal and
 their covariance in the camera optical frame. Every target-class box of a frame with a
 POI is a candidate (the tracked one first), so that the controller can pick the one it
@@ -40,6 +41,10 @@ class VisionConfig:
                               doc='run the detector every N frames, the KLT tracker between')
     conf_thres: float = param(0.25, lo=0.0, hi=1.0, doc='detector score threshold')
     iou_thres: float = param(0.45, lo=0.0, hi=1.0, doc='non-maximum suppression IoU')
+    zoom: float = param(2.0, lo=1.0, hi=4.0,
+                        doc='a frame without a target-class box is looked at again, one tile '
+                            'magnified this much (around the lost box, else the next of a '
+                            'grid): small, far targets; 1 = off')
     target_class: str = param('bolt_plate', choices=OBJECT_CLASSES, doc='class to inspect')
     min_track_quality: float = param(0.5, lo=0.0, hi=1.0,
                                      doc='KLT inlier ratio below which the frame is re-detected')
@@ -89,6 +94,7 @@ class VisionPipeline:
         self._since_detect = self.config.detect_every   # detect on the first frame
         self._last_box: NDArray[np.float64] | None = None   # the tracked box of the frame before
         self._track_score = 0.0     # the detector's score of the tracked box
+        self._next_tile = 0         # the zoom grid's tile to look at next
 
     def process(self, rgb: NDArray[np.uint8], depth_m: NDArray[np.floating[Any]],
                 stamp_s: float) -> FrameResult:
@@ -155,10 +161,11 @@ class VisionPipeline:
         boxes: list[tuple[NDArray[np.float64], float]] = []
         if self.detector is not None:
             with _timer(res, 'detector'):
-                dets = np.asarray(self.detector.predict(rgb, self.config.conf_thres,
-                                                        self.config.iou_thres))
-            mine = dets[dets[:, 5].astype(int) == self.target_class] if len(dets) else dets
-            mine = mine[np.argsort(-mine[:, 4])][:MAX_CANDIDATES] if len(mine) else mine
+                dets = self._target_boxes(np.asarray(self.detector.predict(
+                    rgb, self.config.conf_thres, self.config.iou_thres)))
+                if not len(dets) and self.config.zoom > 1.0:
+                    dets = self._target_boxes(self._zoomed(rgb))
+            mine = dets[np.argsort(-dets[:, 4])][:MAX_CANDIDATES] if len(dets) else dets
             if len(mine):
                 first = 0
                 if self._last_box is not None:
@@ -174,6 +181,35 @@ class VisionPipeline:
             with _timer(res, 'tracker'):
                 self.tracker.init(gray, boxes[0][0])
         return boxes
+
+    def _target_boxes(self, dets: np.ndarray) -> np.ndarray:
+        return dets[dets[:, 5].astype(int) == self.target_class] if len(dets) else dets
+
+    def _zoomed(self, rgb: NDArray[np.uint8]) -> np.ndarray:
+        """Detections in one tile of 1/zoom the frame's side, magnified to the frame's
+        size and mapped back: centred on the box lost (its target is still there), else
+        the next of a grid of half-overlapping tiles (every object smaller than half a
+        tile lies whole in one of them)."""
+        assert self.detector is not None
+        h, w = rgb.shape[:2]
+        zoom = self.config.zoom
+        tw, th = int(round(w / zoom)), int(round(h / zoom))
+        if self._last_box is not None:
+            cx, cy = (self._last_box[:2] + self._last_box[2:]) / 2.0
+            x0, y0 = cx - tw / 2.0, cy - th / 2.0
+        else:
+            n = int(np.ceil(2.0 * zoom)) - 1          # tiles per axis
+            k, self._next_tile = self._next_tile % (n * n), self._next_tile + 1
+            x0, y0 = (k % n) * (w - tw) / max(n - 1, 1), (k // n) * (h - th) / max(n - 1, 1)
+        x0 = int(round(min(max(x0, 0.0), w - tw)))
+        y0 = int(round(min(max(y0, 0.0), h - th)))
+        tile = cv2.resize(rgb[y0:y0 + th, x0:x0 + tw], (w, h), interpolation=cv2.INTER_LINEAR)
+        dets = np.array(self.detector.predict(tile, self.config.conf_thres,
+                                              self.config.iou_thres), dtype=np.float64)
+        if len(dets):
+            dets[:, [0, 2]] = dets[:, [0, 2]] * (tw / w) + x0
+            dets[:, [1, 3]] = dets[:, [1, 3]] * (th / h) + y0
+        return dets
 
 
 def check_frame(rgb: np.ndarray, depth_m: np.ndarray, intrinsics: CameraIntrinsics

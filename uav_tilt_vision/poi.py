@@ -15,6 +15,9 @@ MIN_SOLIDITY = 0.85         # blob area / convex hull area
 MAX_CENTRE_DIST_FRAC = 0.35  # blob centroid to box centre, fraction of the box half-diagonal
 MIN_REL_CONTRAST = 0.35     # (surround - blob) / surround mean grey
 MIN_CONTRAST_OVER_STD = 2.5  # surround - blob, in standard deviations of the surround
+# A box smaller than this (a plate 4-5 m away: 12-15 px) is resampled to it first: its
+# bolt head is a pixel or two, too small for the area and shape tests at native size.
+MIN_BOX_PX = 40
 
 
 def find_poi(rgb: np.ndarray, box_xyxy: Sequence[float] | np.ndarray
@@ -34,8 +37,12 @@ def find_poi(rgb: np.ndarray, box_xyxy: Sequence[float] | np.ndarray
     if cx1 - cx0 < 4 or cy1 - cy0 < 4:
         return None
     gray = cv2.cvtColor(np.ascontiguousarray(rgb[cy0:cy1, cx0:cx1]), cv2.COLOR_RGB2GRAY)
+    zoom = max(MIN_BOX_PX / min(bw, bh), 1.0)
+    if zoom > 1.0:
+        gray = cv2.resize(gray, None, fx=zoom, fy=zoom, interpolation=cv2.INTER_CUBIC)
+        bw, bh = bw * zoom, bh * zoom
     gray = cv2.GaussianBlur(gray, (3, 3), 0)
-    box_c = np.array([(x0 + x1) / 2.0 - cx0, (y0 + y1) / 2.0 - cy0])
+    box_c = np.array([(x0 + x1) / 2.0 - cx0, (y0 + y1) / 2.0 - cy0]) * zoom
     mask = _dark_mask(gray, box_c, bw, bh)
     best = None
     for blob in _blobs(mask, gray, bw * bh):
@@ -47,7 +54,9 @@ def find_poi(rgb: np.ndarray, box_xyxy: Sequence[float] | np.ndarray
             best = (dist, blob['centroid'], score)
     if best is None:
         return None
-    return float(best[1][0] + cx0), float(best[1][1] + cy0), float(best[2])
+    # back to source pixel indices (cv2.resize aligns pixel centres, not corners)
+    u, v = (best[1] + 0.5) / zoom - 0.5
+    return float(u + cx0), float(v + cy0), float(best[2])
 
 
 def _dark_mask(gray: np.ndarray, box_c: np.ndarray, bw: float, bh: float) -> np.ndarray:
