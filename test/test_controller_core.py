@@ -63,6 +63,17 @@ def test_autostart_takes_off_and_commands_stay_finite_and_non_negative():
     assert np.sum(command.thrusts_n) > 0.0
 
 
+def test_autostart_with_the_target_from_vision_waits_for_vision():
+    core = ControllerCore(VEHICLE, from_dict(ControllerConfig, dict(autostart='inspect')))
+    for k in range(30):
+        core.on_odometry(_state(k * DT_S))
+        status = core.tick(k * DT_S, np.zeros(3), DT_S)[1]
+        assert status['mode'] == 'IDLE'
+    core.on_target_candidates(30 * DT_S, [])        # a frame without a target
+    core.on_odometry(_state(30 * DT_S))
+    assert core.tick(30 * DT_S, np.zeros(3), DT_S)[1]['mode'] == 'TAKEOFF'
+
+
 def test_wrench_is_rotated_to_map_and_the_push_is_positive():
     # facing the wall, yawed: the wall pushes back along -x_FLU = +normal
     core = _core()

@@ -242,5 +242,14 @@ def test_bad_arguments_start_nothing(tmp_path):
 def test_mission_watch_waits_for_the_return_to_idle(modes, success, result):
     watch = MissionWatch()
     for mode in modes:
-        watch.update({'mode': mode, 'success': success})
+        watch.update({'mode': mode, 'success': success, 'task_outcomes': ''})
     assert watch.result is result
+
+
+def test_mission_watch_ends_on_a_mission_it_never_heard_fly():
+    # a failsafe right after takeoff, over before the watcher's subscription matched
+    watch = MissionWatch()
+    watch.update({'mode': 'IDLE', 'success': False, 'task_outcomes': ''})
+    assert watch.result is None
+    watch.update({'mode': 'IDLE', 'success': False, 'task_outcomes': 'not_run'})
+    assert watch.result is False

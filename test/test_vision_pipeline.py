@@ -138,12 +138,12 @@ def test_redetects_on_the_frame_the_track_is_lost():
         blank = np.full_like(rgb, 128)
         detector.seg = np.full_like(detector.seg, -1)
         lost = pipeline.process(blank, depth, 0.1)
-        # the whole frame, then the magnified tile around the box lost
-        assert lost.detected and not lost.found and detector.calls == 3
+        # 1 m away: no magnified second look (zoom_beyond_m)
+        assert lost.detected and not lost.found and detector.calls == 2
         # Nothing to track: the next frame is detected again, and the target comes back.
         detector.seg = plant.render(segmentation=True)[2]
         back = pipeline.process(rgb, depth, 0.2)
-        assert back.detected and back.found and detector.calls == 4
+        assert back.detected and back.found and detector.calls == 3
     finally:
         plant.close()
 
@@ -179,13 +179,23 @@ def test_a_target_too_small_for_the_detector_is_found_in_a_magnified_tile(zoom):
         assert not len(detector.predict(rgb))
         pipeline = VisionPipeline(detector, K, VisionConfig(detect_every=1, zoom=zoom))
         # every frame without a box looks at the next tile: one of a grid's tiles has it
-        found = [pipeline.process(rgb, depth, k / 30.0).box_xyxy for k in range(n_tiles)]
-        boxes = [b for b in found if b is not None]
-        assert boxes, (zoom, x0, y0)
-        # in the frame's pixels, to a pixel of the magnified tile's
-        assert np.allclose(boxes[0], [x0, y0, x0 + side, y0 + side], atol=1.0 / zoom + 0.5)
+        found = [pipeline.process(rgb, depth, k / 30.0).box_xyxy for k in range(n_tiles + 1)]
+        first = next((k for k, b in enumerate(found) if b is not None), None)
+        assert first is not None and first < n_tiles, (zoom, x0, y0)
+        square = np.array([x0, y0, x0 + side, y0 + side], float)
+        # in the frame's pixels, to a pixel of the magnified tile's; a tile may cut the
+        # square, the next look (centred on that box) sees it whole
+        tol = 1.0 / zoom + 0.5
+        assert np.all(found[first][:2] >= square[:2] - tol), (found[first], square)
+        assert np.all(found[first][2:] <= square[2:] + tol), (found[first], square)
+        assert np.allclose(found[first + 1], square, atol=tol), (found, square)
         off = VisionPipeline(detector, K, VisionConfig(detect_every=1, zoom=1.0))
         assert all(off.process(rgb, depth, k / 30.0).box_xyxy is None for k in range(n_tiles))
+        # nearer than zoom_beyond_m a target is big enough: no second look
+        near = VisionPipeline(detector, K, VisionConfig(detect_every=1, zoom=zoom,
+                                                        zoom_beyond_m=3.0))
+        assert all(near.process(rgb, np.full_like(depth, 2.9), k / 30.0).box_xyxy is None
+                   for k in range(n_tiles))
 
 
 def test_without_a_detector_every_frame_is_no_target():

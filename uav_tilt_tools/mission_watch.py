@@ -1,7 +1,9 @@
 """Wait for the controller's mission to end and exit with its result (used by launch.sh).
 
 Watches `controller/status`: the mission has started once the mode leaves IDLE and ended
-when it is back in IDLE; the exit code is 0 when the status then says ``success``, else 1.
+when it is back in IDLE, or when an IDLE status says how its tasks went (a mission that
+ended before the watcher heard it fly: a failsafe right after the start); the exit code is
+0 when the status then says ``success``, else 1.
 """
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
@@ -24,7 +26,8 @@ class MissionWatch:
         self.mode = values.get('mode', self.mode)
         if self.mode not in NOT_FLYING:
             self.started = True
-        elif self.started and self.mode == Mode.IDLE and self.result is None:
+        elif self.mode == Mode.IDLE and self.result is None and (
+                self.started or values.get('task_outcomes')):
             self.result = values.get('success') is True
 
 

@@ -45,6 +45,9 @@ class VisionConfig:
                         doc='a frame without a target-class box is looked at again, one tile '
                             'magnified this much (around the lost box, else the next of a '
                             'grid): small, far targets; 1 = off')
+    zoom_beyond_m: float = param(3.0, lo=0.0, hi=100.0, unit='m',
+                                 doc='the magnified look only at a tile whose median depth is '
+                                     'beyond this (nearer, a target is big enough unmagnified)')
     target_class: str = param('bolt_plate', choices=OBJECT_CLASSES, doc='class to inspect')
     min_track_quality: float = param(0.5, lo=0.0, hi=1.0,
                                      doc='KLT inlier ratio below which the frame is re-detected')
@@ -106,7 +109,7 @@ class VisionPipeline:
             tracked = self._track(gray, res)
             boxes = None if tracked is None else [(tracked, self._track_score)]
         if boxes is None:
-            boxes = self._detect(rgb, gray, res)
+            boxes = self._detect(rgb, gray, depth_m, res)
         self._since_detect += 1
         if not boxes:
             return res
@@ -152,7 +155,8 @@ class VisionPipeline:
         self._last_box = box
         return box
 
-    def _detect(self, rgb: NDArray[np.uint8], gray: np.ndarray, res: FrameResult
+    def _detect(self, rgb: NDArray[np.uint8], gray: np.ndarray,
+                depth_m: NDArray[np.floating[Any]], res: FrameResult
                 ) -> list[tuple[NDArray[np.float64], float]]:
         """Run the detector; [(box, score)] of its target-class boxes, the one to track
         first (the track's continuation, else the best); start tracking that one."""
@@ -164,7 +168,7 @@ class VisionPipeline:
                 dets = self._target_boxes(np.asarray(self.detector.predict(
                     rgb, self.config.conf_thres, self.config.iou_thres)))
                 if not len(dets) and self.config.zoom > 1.0:
-                    dets = self._target_boxes(self._zoomed(rgb))
+                    dets = self._target_boxes(self._zoomed(rgb, depth_m))
             mine = dets[np.argsort(-dets[:, 4])][:MAX_CANDIDATES] if len(dets) else dets
             if len(mine):
                 first = 0
@@ -185,11 +189,12 @@ class VisionPipeline:
     def _target_boxes(self, dets: np.ndarray) -> np.ndarray:
         return dets[dets[:, 5].astype(int) == self.target_class] if len(dets) else dets
 
-    def _zoomed(self, rgb: NDArray[np.uint8]) -> np.ndarray:
+    def _zoomed(self, rgb: NDArray[np.uint8], depth_m: NDArray[np.floating[Any]]
+                ) -> np.ndarray:
         """Detections in one tile of 1/zoom the frame's side, magnified to the frame's
         size and mapped back: centred on the box lost (its target is still there), else
         the next of a grid of half-overlapping tiles (every object smaller than half a
-        tile lies whole in one of them)."""
+        tile lies whole in one of them). None on a tile nearer than zoom_beyond_m."""
         assert self.detector is not None
         h, w = rgb.shape[:2]
         zoom = self.config.zoom
@@ -203,6 +208,11 @@ class VisionPipeline:
             x0, y0 = (k % n) * (w - tw) / max(n - 1, 1), (k // n) * (h - th) / max(n - 1, 1)
         x0 = int(round(min(max(x0, 0.0), w - tw)))
         y0 = int(round(min(max(y0, 0.0), h - th)))
+        # a sparse median: the tile's distance, not its detail
+        depth = depth_m[y0:y0 + th:4, x0:x0 + tw:4]
+        depth = depth[np.isfinite(depth)]
+        if not depth.size or np.median(depth) <= self.config.zoom_beyond_m:
+            return np.zeros((0, 6))
         tile = cv2.resize(rgb[y0:y0 + th, x0:x0 + tw], (w, h), interpolation=cv2.INTER_LINEAR)
         dets = np.array(self.detector.predict(tile, self.config.conf_thres,
                                               self.config.iou_thres), dtype=np.float64)

@@ -54,8 +54,8 @@ class VisionNodeConfig(VisionConfig):
 
 # Parameters a `ros2 param set` changes while vision runs (the pipeline reads them every
 # frame); the others are read-only.
-DYNAMIC = ('detect_every', 'conf_thres', 'iou_thres', 'zoom', 'min_track_quality',
-           'pose_window_px', 'pixel_sigma_px')
+DYNAMIC = ('detect_every', 'conf_thres', 'iou_thres', 'zoom', 'zoom_beyond_m',
+           'min_track_quality', 'pose_window_px', 'pixel_sigma_px')
 
 
 def open_detector(model_path: str | os.PathLike[str], backend: str
