@@ -86,9 +86,9 @@ class ControllerCore:
         self._truth_id = ''         # the target of the task under way
         self._f_contact_map = np.zeros(3)
         self._autostarted = False
-        # with the target from vision, a frame of vision's came in (an autostart waits for
-        # it: the detector loads while the plant already runs, the start's busiest moments)
-        self._vision_heard = False
+        # an autostart with the target from vision waits for vision's first frame: the
+        # detector loads while the plant already runs, the start's busiest moments
+        self._target_source_up = self.config.target_source != 'vision'
         self._was_idle = True
         self.f_normal_n = 0.0
         # setpoint_hook(setpoint) -> setpoint: an outer loop's correction of the mission's
@@ -134,7 +134,7 @@ class ControllerCore:
         optical frame, the tracked one first); returns True when one was accepted."""
         if self.config.target_source != 'vision':
             return False
-        self._vision_heard = True
+        self._target_source_up = True
         return self.estimator.add_candidates(
             stamp_s, [(c.p_cam, c.n_cam, c.cov_cam) for c in candidates])
 
@@ -191,8 +191,7 @@ class ControllerCore:
         self.estimator.locked = self.mission.mode in NEAR_WALL
         target = self.estimator.estimate(t_s)
         self.f_normal_n = self._normal_force(target)
-        if self.config.autostart and not self._autostarted and (
-                self._vision_heard or self.config.target_source != 'vision'):
+        if self.config.autostart and not self._autostarted and self._target_source_up:
             self._autostarted = self.mission.inspect()[0]
         setpoint = self.mission.update(t_s, self._odom, target, self.f_normal_n, odom_age_s)
         if self.mission.mode == Mode.IDLE:

@@ -4,8 +4,8 @@ Every ``detect_every`` frames (and whenever the track is lost or its quality dro
 CNN detector runs; of its target-class boxes the one that continues the track (the best
 overlap with the tracked box) is tracked on, else the highest-scoring one; in between,
 the KLT tracker carries that box. A frame without one is looked at again through a
-magnified tile (a far target is a dozen pixels). Inside each box the POI (bolt head) is found by
-morphology, and the depth image around it gives the 3D point, the surface normal and
+magnified tile (a far target is a dozen pixels). Inside each box the POI (bolt head) is
+found by morphology, and the depth image around it gives the 3D point, the surface normal and
 their covariance in the camera optical frame. Every target-class box of a frame with a
 POI is a candidate (the tracked one first), so that the controller can pick the one it
 is after among look-alikes.
@@ -194,7 +194,7 @@ class VisionPipeline:
         """Detections in one tile of 1/zoom the frame's side, magnified to the frame's
         size and mapped back: centred on the box lost (its target is still there), else
         the next of a grid of half-overlapping tiles (every object smaller than half a
-        tile lies whole in one of them). None on a tile nearer than zoom_beyond_m."""
+        tile lies whole in one of them). Nothing on a tile nearer than zoom_beyond_m."""
         assert self.detector is not None
         h, w = rgb.shape[:2]
         zoom = self.config.zoom
