@@ -69,11 +69,11 @@ class KltBoxTracker:
         lk: dict[str, Any] = dict(
             winSize=(cfg.win_size_px, cfg.win_size_px), maxLevel=cfg.pyramid_levels,
             criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
-        # OpenCV's stubs require nextPts, which the function allocates when given None
+        # OpenCV 4's stubs require nextPts, which the function allocates when given None
         fwd, st_f, _ = cv2.calcOpticalFlowPyrLK(
-            self._gray, gray, prev, None, **lk)  # type: ignore[call-overload]
+            self._gray, gray, prev, None, **lk)  # type: ignore[call-overload, unused-ignore]
         back, st_b, _ = cv2.calcOpticalFlowPyrLK(
-            gray, self._gray, fwd, None, **lk)  # type: ignore[call-overload]
+            gray, self._gray, fwd, None, **lk)  # type: ignore[call-overload, unused-ignore]
         fb_err = np.linalg.norm((back - prev).reshape(-1, 2), axis=1)
         ok = (st_f.ravel() == 1) & (st_b.ravel() == 1) & (fb_err < cfg.fb_max_error_px)
         src, dst = prev.reshape(-1, 2)[ok], fwd.reshape(-1, 2)[ok]
