@@ -166,9 +166,30 @@ def test_random_crop_keeps_an_object_and_clips_boxes():
     assert n_cut >= 1
 
 
+@pytest.mark.parametrize('distance_m', [(0.4, 0.6), (4.5, 5.0)])
+def test_camera_looks_at_the_wall_from_the_asked_distance(distance_m):
+    cam, client = CameraConfig(), p.connect(p.DIRECT)
+    try:
+        rng = np.random.default_rng([12, int(distance_m[0] * 10)])
+        info = dataset.build_random_world(Scene(client), rng, dataset.SPLITS['train'])
+        n = info.R_map_wall[:, 2]
+        for _ in range(40):
+            eye, R_cam = dataset.camera_pose(rng, info, cam, distance_m)
+            if eye[2] <= 0.15:      # lifted off the ground: no longer on the drawn ray
+                continue
+            # along the optical axis to the wall's plane: the drawn distance (the objects it aims
+            # at stand out of the plane by their thickness, a few mm)
+            t = (info.wall_origin_map - eye) @ n / (R_cam[:, 2] @ n)
+            assert distance_m[0] - 0.02 <= t <= distance_m[1] + 0.02, t
+    finally:
+        p.disconnect(client)
+
+
 def test_cli_dataset_prints_json(tmp_path, capsys):
     assert vision_cli.main(['dataset', '--out', str(tmp_path), '--n', '2', '--seed', '3',
-                            '--split', 'heldout']) == 0
+                            '--split', 'heldout', '--distance-m', '1', '2']) == 0
     out = json.loads(capsys.readouterr().out)
     assert out['seed'] == 3 and out['split'] == 'heldout' and out['n'] == 2
+    assert out['distance_m'] == [1.0, 2.0]
+    assert json.loads((tmp_path / 'meta.json').read_text())['distance_m'] == [1.0, 2.0]
     assert len(list((tmp_path / 'images').iterdir())) == 2

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from uav_tilt_vision.metrics import coco_map, mean_ap
+from uav_tilt_vision.metrics import bootstrap, coco_map, confidence_intervals, mean_ap
 
 GT = np.array([[0, 0, 10, 10, 0.0]])
 
@@ -166,3 +166,35 @@ def test_agrees_with_pycocotools(seed, with_ignores):
     assert ours['map50_95'] == pytest.approx(ref['map50_95'], abs=1e-9)
     assert ours['ap50_per_class'] == pytest.approx(ref['ap50_per_class'], abs=1e-9)
     assert ours['map50_by_area'] == pytest.approx(ref['map50_by_area'], abs=1e-9)
+
+
+def recall_set(n, found, rng):
+    """``n`` images with one labelled box each; a ``found`` share of them detected exactly."""
+    gts = [np.array([[10.0, 10.0, 60.0, 60.0, 0]]) for _ in range(n)]
+    hit = rng.permutation(n) < round(found * n)
+    preds = [np.array([[10.0, 10.0, 60.0, 60.0, 0.9, 0]]) if h else np.zeros((0, 6))
+             for h in hit]
+    return preds, gts
+
+
+def test_bootstrap_interval_has_the_binomial_width():
+    # AP@0.5 of a set whose detections are all right but find a share f of the objects is
+    # its recall f (to the 101-point sampling); resampling images spreads it as a binomial
+    # share: standard deviation sqrt(f (1 - f) / n).
+    n, f = 100, 0.8
+    preds, gts = recall_set(n, f, np.random.default_rng())
+    samples = bootstrap(preds, gts, resamples=100, seed=1)
+    lo, hi = confidence_intervals(samples)['map50']
+    sd = np.sqrt(f * (1 - f) / n)
+    assert lo < f < hi
+    assert 0.6 * 2 * 1.96 * sd <= hi - lo <= 1.4 * 2 * 1.96 * sd
+    # the same seed draws the same images: a model paired with itself differs by nothing
+    again = bootstrap(preds, gts, resamples=100, seed=1)
+    assert [s['map50'] for s in again] == [s['map50'] for s in samples]
+
+
+def test_bootstrap_of_perfect_detections_is_one_everywhere():
+    preds, gts = recall_set(50, 1.0, np.random.default_rng(0))
+    ci = confidence_intervals(bootstrap(preds, gts, resamples=20))
+    assert ci['map50'] == [1.0, 1.0] and ci['ap50_per_class'] == {0: [1.0, 1.0]}
+    assert ci['map50_by_area']['small'] is None and ci['level'] == 0.95  # 50 px boxes

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from uav_tilt_vision.detector import DEFAULT_ANCHORS, STRIDES, load_model
-from uav_tilt_vision.train import card_path, evaluate, train
+from uav_tilt_vision.train import card_path, evaluate, grown, train
 from uav_tilt_vision.yolo_data import (IGNORE_CLASS, YoloDataset, collate, kmeans_anchors,
                                        read_labels)
 from uav_tilt_vision.yolo_loss import YoloLoss, assign, ciou, distill_loss, ignored_cells
@@ -257,6 +257,38 @@ def test_cli_continued_run_keeps_its_lineage(data8, tmp_path):
     assert card['init']['seed'] == 0 and card['seed'] == 1 and card['total_epochs'] == 2
     assert (card['source'], card['pruning_ratio']) == ('models/fp32.pt', 0.25)
     assert load_model(model).meta['total_epochs'] == 2
+
+
+def test_grown_model_adds_a_finer_head_and_keeps_the_others(data8, tmp_path):
+    from uav_tilt_vision import vision_cli
+    three = tmp_path / 'three.pt'
+    anchors = [[[90.0, 90.0], [100.0, 100.0], [110.0, 110.0]],
+               [[65.0, 65.0], [70.0, 70.0], [80.0, 80.0]],
+               [[50.0, 50.0], [55.0, 55.0], [60.0, 60.0]]]
+    train(data8, three, epochs=1, seed=0, batch=4, width_mult=0.125, scales=3, device='cpu',
+          anchors=anchors, log=lambda s: None)
+    model = load_model(three)
+    four = grown(model, 4, data8).eval()
+    assert four.strides == (32, 16, 8, 4)
+    # the new head's anchors cluster the labels smaller than every anchor the model had
+    wh = YoloDataset(data8).label_wh()
+    small = wh[wh.prod(1) < float(model.anchors.prod(-1).min())]
+    np.testing.assert_allclose(four.anchors[3].numpy(), kmeans_anchors(small, 1)[0], rtol=1e-6)
+    assert float(four.anchors[3].prod(-1).max()) < float(model.anchors.prod(-1).min())
+    torch.testing.assert_close(four.anchors[:3], model.anchors)
+    x = torch.stack([YoloDataset(data8)[i][0] for i in range(2)])
+    with torch.no_grad():
+        for a, b in zip(model(x), four(x)[:3]):
+            torch.testing.assert_close(a, b)
+    out = tmp_path / 'four.pt'
+    args = ['train', '--data', str(data8), '--init', str(three), '--grow-scales', '4',
+            '--out', str(out), '--epochs', '1', '--batch', '4', '--device', 'cpu']
+    assert vision_cli.main(args) == 0
+    assert load_model(out).strides == (32, 16, 8, 4)
+    assert json.loads(card_path(out).read_text())['grown_from_scales'] == 3
+    with pytest.raises(SystemExit) as stop:
+        vision_cli.main(['train', '--data', str(data8), '--grow-scales', '4'])
+    assert stop.value.code == 2
 
 
 def fake_heads(obj_logit_bg=-20.0, num_classes=3, seed=0):

@@ -2,15 +2,16 @@
 
 Each world (wall, ground, 1-5 inspection objects, plain distractor panels) is built with
 ``uav_tilt_sim.world.build_world`` and photographed by the plant's camera model from
-``IMAGES_PER_WORLD`` random poses: 0.4-4 m (log-uniform) from a point on the wall, up to
-45 deg off its normal, with roll jitter and, sometimes, an occluding bar in front. Lighting,
-exposure, blur and sensor noise are drawn per image. In ``VEHICLE_PROB`` of the images the
-camera is the vehicle's own eye-in-hand camera, so its tool (rod and tip) is in view as in
-flight, in front of the target at contact. Boxes are the tight bounds of each object's
-pixels in the simulator's segmentation, so occlusion and truncation are exact. An object
-in view but less visible than the labelling rule asks (``MIN_VISIBLE_PX``,
-``MIN_VISIBLE_FRACTION``) is written to ``ignore/`` instead of ``labels/``: a region where
-a detection is neither right nor wrong (COCO's crowd regions, KITTI's "don't care").
+``IMAGES_PER_WORLD`` random poses: 0.4-5 m (log-uniform; the mission's ranges) from a point
+on the wall, up to 45 deg off its normal, with roll jitter and, sometimes, an occluding bar
+in front. Lighting, exposure, blur and sensor noise are drawn per image. In
+``VEHICLE_PROB`` of the images the camera is the vehicle's own eye-in-hand camera, so its
+tool (rod and tip) is in view as in flight, in front of the target at contact. Boxes are
+the tight bounds of each object's pixels in the simulator's segmentation, so occlusion and
+truncation are exact. An object in view but less visible than the labelling rule asks
+(``MIN_VISIBLE_PX``, ``MIN_VISIBLE_FRACTION``) is written to ``ignore/`` instead of
+``labels/``: a region where a detection is neither right nor wrong (COCO's crowd regions,
+KITTI's "don't care").
 
 Splits (``SPLITS``): ``train`` and ``heldout`` draw from disjoint RNG streams (object,
 wall and ground textures never repeat), disjoint wall texture families and disjoint
@@ -43,8 +44,9 @@ from uav_tilt_sim.world import WorldInfo, build_world
 
 T = TypeVar('T')
 R_ = TypeVar('R_')
-# one world's job for render_world: (out, seed, split, world, image indices, renderer)
-Job = tuple[str, int, str, int, range, str]
+# one world's job for render_world:
+# (out, seed, split, world, image indices, renderer, (min, max) camera distance in m)
+Job = tuple[str, int, str, int, range, str, tuple[float, float]]
 # YOLO rows [class, cx, cy, w, h] (normalised)
 LabelRows = list[list[float]]
 
@@ -55,7 +57,7 @@ MIN_VISIBLE_PX = 30
 # too little of it is left to tell its class.
 MIN_VISIBLE_FRACTION = 0.35
 MAX_VIEW_ANGLE_DEG = 45.0
-DISTANCE_M = (0.4, 4.0)
+DISTANCE_M = (0.4, 5.0)   # the mission's ranges: a 0.2 m plate spans 11-140 px
 PATCH_UV_M = ((-2.0, 0.3), (2.0, 3.1))   # where objects and panels go on the wall (u, v)
 OCCLUDER_PROB = 0.3
 VEHICLE_PROB = 0.5
@@ -122,15 +124,16 @@ def build_random_world(scene: Scene, rng: np.random.Generator, spec: SplitSpec) 
     return info
 
 
-def camera_pose(rng: np.random.Generator, info: WorldInfo, cam: CameraConfig
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Random (eye, R_map_cam) 0.4-4 m from the wall looking at it, up to 45 deg off-normal.
+def camera_pose(rng: np.random.Generator, info: WorldInfo, cam: CameraConfig,
+                distance_m: Sequence[float] = DISTANCE_M) -> tuple[np.ndarray, np.ndarray]:
+    """Random (eye, R_map_cam) looking at the wall from ``distance_m`` (log-uniform) of a
+    point on it, up to 45 deg off-normal.
 
     The aim point is offset from an object by up to the half field of view, so objects
     land anywhere in the image, including cut by its border.
     """
     R = info.R_map_wall
-    dist = float(np.exp(rng.uniform(*np.log(DISTANCE_M))))
+    dist = float(np.exp(rng.uniform(*np.log(distance_m))))
     obj = info.objects[int(rng.integers(len(info.objects)))]
     half_fov = dist * np.array([cam.width / cam.fx, cam.height / cam.fy]) / 2
     aim = obj.centre_map + R[:, :2] @ (rng.uniform(-1, 1, 2) * half_fov)
@@ -242,7 +245,7 @@ def _renderer(renderer: str) -> Any:
 
 def render_world(job: Job) -> list[int]:
     """Render and write the images of one world; returns the class ids it labelled."""
-    out, seed, split, world, indices, renderer = job
+    out, seed, split, world, indices, renderer, distance_m = job
     spec, cam = SPLITS[split], CameraConfig()
     rng = np.random.default_rng([seed, spec.stream, world])
     client = p.connect(p.DIRECT)
@@ -251,7 +254,7 @@ def render_world(job: Job) -> list[int]:
         info = build_random_world(scene, rng, spec)
         classes: list[int] = []
         for k in indices:
-            eye, R_cam = camera_pose(rng, info, cam)
+            eye, R_cam = camera_pose(rng, info, cam, distance_m)
             extra = [add_occluder(scene, rng, eye, info)] \
                 if rng.random() < OCCLUDER_PROB else []
             if rng.random() < VEHICLE_PROB:
@@ -278,20 +281,27 @@ def label_text(rows: Iterable[Sequence[float]]) -> str:
 
 
 def generate(out: str | os.PathLike[str], n: int, seed: int = 0, split: str = 'train',
-             jobs: int = 1, show_progress: bool = True, renderer: str = 'gl') -> dict[str, Any]:
+             jobs: int = 1, show_progress: bool = True, renderer: str = 'gl',
+             distance_m: Sequence[float] = DISTANCE_M) -> dict[str, Any]:
     """Write ``n`` labelled images and ``meta.json`` to ``out``; returns the meta dict.
 
     ``renderer``: the camera's renderer (``gl`` or ``tiny``, see ``uav_tilt_sim.camera``);
-    train on images of the renderer the plant uses.
+    train on images of the renderer the plant uses. ``distance_m``: (min, max) distance of
+    the camera from the point it looks at (sets rendered before the mission's ranges grew
+    to 5 m used (0.4, 4.0)).
     """
     if split not in SPLITS:
         raise ValueError(f'unknown split {split!r}; expected one of {tuple(SPLITS)}')
+    lo, hi = (float(d) for d in distance_m)
+    if not 0.0 < lo <= hi:
+        raise ValueError(f'distance_m must be 0 < min <= max, got {list(distance_m)}')
     out = Path(out)
     (out / 'images').mkdir(parents=True, exist_ok=True)
     for folder in ('labels', 'ignore'):
         (out / folder).mkdir(parents=True, exist_ok=True)
     worlds = [(str(out), seed, split, w, range(w * IMAGES_PER_WORLD,
-                                               min((w + 1) * IMAGES_PER_WORLD, n)), renderer)
+                                               min((w + 1) * IMAGES_PER_WORLD, n)), renderer,
+               (lo, hi))
               for w in range(-(-n // IMAGES_PER_WORLD))]
     bar = tqdm(total=n, desc=f'dataset {split}', unit='img', disable=not show_progress)
     counts = np.zeros(len(CLASSES), int)
@@ -306,7 +316,7 @@ def generate(out: str | os.PathLike[str], n: int, seed: int = 0, split: str = 't
             'heldout_policy': 'train and heldout use disjoint RNG streams (all textures), '
                               'disjoint wall families and disjoint lighting ranges',
             'camera': dataclasses.asdict(CameraConfig(renderer=renderer)),
-            'renderer': _renderer(renderer).name, 'distance_m': list(DISTANCE_M),
+            'renderer': _renderer(renderer).name, 'distance_m': [lo, hi],
             'max_view_angle_deg': MAX_VIEW_ANGLE_DEG, 'occluder_prob': OCCLUDER_PROB,
             'vehicle_prob': VEHICLE_PROB,
             'min_visible_px': MIN_VISIBLE_PX, 'min_visible_fraction': MIN_VISIBLE_FRACTION}

@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence, TypeVar, ca
 import numpy as np
 import torch
 
-from uav_tilt_vision.detector import DEFAULT_ANCHORS, IMG_SIZE, Detector, save_model
-from uav_tilt_vision.metrics import mean_ap
+from uav_tilt_vision.detector import DEFAULT_ANCHORS, IMG_SIZE, Detector, grow_scales, save_model
+from uav_tilt_vision.metrics import bootstrap, confidence_intervals, mean_ap
 from uav_tilt_vision.yolo_data import (HSV_GAINS, YoloDataset, collate, kmeans_anchors,
                                        read_meta)
 from uav_tilt_vision.yolo_loss import YoloLoss, distill_loss
@@ -183,6 +183,16 @@ def train(data_dir: str | os.PathLike[str], out_path: str | os.PathLike[str], ep
     return card
 
 
+def grown(model: Detector, scales: int, data_dir: str | os.PathLike[str]) -> Detector:
+    """``model`` with finer heads added up to ``scales`` (``detector.grow_scales``) for the
+    objects smaller than any anchor it has: the new anchors cluster (k-means) the set's
+    labels of less area than its smallest anchor, the finest new head the smallest."""
+    wh = YoloDataset(data_dir, model.img_size).label_wh()
+    smallest = float(model.anchors.prod(-1).min())
+    new = scales - len(model.strides)
+    return grow_scales(model, scales, kmeans_anchors(wh[wh.prod(1) < smallest], new))
+
+
 def check_teacher(teacher: Detector, model: Detector) -> None:
     """ValueError unless ``teacher``'s heads and anchors match ``model``'s (distillation)."""
     same = (teacher.num_classes == model.num_classes and teacher.img_size == model.img_size
@@ -207,15 +217,12 @@ def ema_average(decay: float, ramp_steps: int = 500
     return avg
 
 
-def evaluate(model: 'Detector | TorchDetector | OnnxDetector', data_dir: str | os.PathLike[str],
-             conf_thres: float = 0.001, iou_thres: float = 0.6,
-             batch: int = 16) -> dict[str, Any]:
-    """COCO-style mAP of ``model`` on a YOLO-format set (``metrics.mean_ap``).
-
-    AP@0.5 per class is keyed by the class names of the set's meta.json where it has them.
-    The set's ignore regions (objects in view but too little visible to label) are COCO's
-    crowd regions: detections on them are neither true nor false positives; the result
-    counts them in 'ignore_regions'.
+def predict_set(model: 'Detector | TorchDetector | OnnxDetector',
+                data_dir: str | os.PathLike[str], conf_thres: float = 0.001,
+                iou_thres: float = 0.6, batch: int = 16
+                ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """(predictions, labels, ignore regions) of ``model`` on a YOLO-format set, one array
+    per image in ``metrics``' layout.
 
     ``model``: a ``Detector`` or any object whose ``predict(images, conf_thres, iou_thres)``
     maps a list of uint8 RGB images to one (N, 6) array each (``backends``).
@@ -230,8 +237,31 @@ def evaluate(model: 'Detector | TorchDetector | OnnxDetector', data_dir: str | o
         for k, img in enumerate(images):
             gts.append(ds.ground_truth(start + k, img.shape))
             ignores.append(ds.ground_truth(start + k, img.shape, 'ignore'))
-    res = {**mean_ap(preds, gts, ignores), 'ignore_regions': sum(len(i) for i in ignores)}
+    return preds, gts, ignores
+
+
+def class_names(res: dict[str, Any], data_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """``res`` with its per-class entries keyed by the set's class names where it has them."""
     names = read_meta(data_dir).get('classes')
     if names:
         res['ap50_per_class'] = {names[c]: ap for c, ap in res['ap50_per_class'].items()}
     return res
+
+
+def evaluate(model: 'Detector | TorchDetector | OnnxDetector', data_dir: str | os.PathLike[str],
+             conf_thres: float = 0.001, iou_thres: float = 0.6,
+             batch: int = 16, resamples: int = 0) -> dict[str, Any]:
+    """COCO-style mAP of ``model`` on a YOLO-format set (``metrics.mean_ap``).
+
+    AP@0.5 per class is keyed by the class names of the set's meta.json where it has them.
+    The set's ignore regions (objects in view but too little visible to label) are COCO's
+    crowd regions: detections on them are neither true nor false positives; the result
+    counts them in 'ignore_regions'. With ``resamples`` > 0 it adds 'ci95', the 95%
+    bootstrap intervals of the metrics over that many resamplings of the images.
+    """
+    preds, gts, ignores = predict_set(model, data_dir, conf_thres, iou_thres, batch)
+    res = {**mean_ap(preds, gts, ignores), 'ignore_regions': sum(len(i) for i in ignores)}
+    if resamples > 0:
+        res['ci95'] = class_names(
+            confidence_intervals(bootstrap(preds, gts, ignores, resamples)), data_dir)
+    return class_names(res, data_dir)

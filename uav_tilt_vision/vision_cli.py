@@ -17,17 +17,22 @@ def log_stderr(line: str) -> None:
 
 
 def _dataset(a):
-    from uav_tilt_vision.dataset import generate
-    meta = generate(a.out, a.n, a.seed, a.split, a.jobs, renderer=a.renderer)
+    from uav_tilt_vision.dataset import DISTANCE_M, generate
+    meta = generate(a.out, a.n, a.seed, a.split, a.jobs, renderer=a.renderer,
+                    distance_m=a.distance_m or DISTANCE_M)
     return {k: meta[k] for k in ('seed', 'split', 'n', 'classes', 'boxes_per_class',
-                                 'renderer')}
+                                 'renderer', 'distance_m')}
 
 
 def _train(a):
     from uav_tilt_vision.detector import load_model
-    from uav_tilt_vision.train import card_path, train
+    from uav_tilt_vision.train import card_path, grown, train
     from uav_tilt_vision.yolo_data import HSV_GAINS
-    extra = {'teacher': a.teacher} if a.teacher else {}
+    extra: dict[str, Any] = {'teacher': a.teacher} if a.teacher else {}
+    model = load_model(a.init) if a.init else None
+    if model is not None and a.grow_scales:   # main() refuses --grow-scales without --init
+        extra['grown_from_scales'] = len(model.strides)
+        model = grown(model, a.grow_scales, a.data)
     if a.init:  # a continued run: its card names the stage it started from
         prior = json.loads(card_path(a.init).read_text())
         extra['init'] = {k: prior.get(k)
@@ -38,8 +43,7 @@ def _train(a):
     card = train(a.data, a.out, a.epochs, a.seed, a.width_mult, batch=a.batch, lr=a.lr,
                  device=a.device, eval_dir=a.eval_data, crop=a.crop, scales=a.scales,
                  hsv=a.hsv or HSV_GAINS,
-                 model=load_model(a.init) if a.init else None,
-                 teacher=load_model(a.teacher) if a.teacher else None,
+                 model=model, teacher=load_model(a.teacher) if a.teacher else None,
                  distill_gain=a.distill_gain, card_extra=extra, bf16=a.bf16, log=log_stderr)
     return {k: v for k, v in card.items() if k != 'loss_history'}
 
@@ -48,14 +52,15 @@ def _eval(a):
     from uav_tilt_vision.backends import load_detector
     from uav_tilt_vision.train import evaluate
     det = load_detector(a.model, a.backend)
-    return {**evaluate(det, a.data), 'model': a.model, 'backend_used': det.backend}
+    return {**evaluate(det, a.data, resamples=a.bootstrap), 'model': a.model,
+            'backend_used': det.backend}
 
 
 def _compress(a):
     from uav_tilt_vision.compress import compress
     return compress(a.model, a.data, a.out_dir, a.ratio, a.finetune_epochs, a.seed,
                     a.calib_images, a.eval_data, crop=a.crop, distill_gain=a.distill_gain,
-                    log=log_stderr)
+                    bf16=a.bf16, log=log_stderr)
 
 
 def _quantize(a):
@@ -81,6 +86,9 @@ def parser() -> argparse.ArgumentParser:
     d.add_argument('--jobs', type=int, default=1, help='render processes')
     d.add_argument('--renderer', choices=('gl', 'tiny'), default='gl',
                    help="the camera's renderer (train on the plant's: gl)")
+    d.add_argument('--distance-m', type=float, nargs=2, metavar=('MIN', 'MAX'),
+                   help='camera distance range, log-uniform (default dataset.DISTANCE_M: the '
+                        'mission\'s ranges)')
     d.set_defaults(run=_dataset)
     t = sub.add_parser('train', help='train the fp32 detector; writes weights + model card')
     t.add_argument('--data', required=True)
@@ -98,6 +106,9 @@ def parser() -> argparse.ArgumentParser:
     t.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
                    help='train on object-centred W x H windows (multiples of 32)')
     t.add_argument('--init', help='continue from this checkpoint (its card is cited)')
+    t.add_argument('--grow-scales', type=int, choices=(3, 4),
+                   help='add finer heads to the --init model up to this many scales (their '
+                        'anchors: k-means on the set\'s labels); its other weights are kept')
     t.add_argument('--teacher', help='also learn to match this model\'s outputs (distillation; '
                                      'same classes, input size and anchors)')
     t.add_argument('--distill-gain', type=float, default=1.0,
@@ -113,6 +124,8 @@ def parser() -> argparse.ArgumentParser:
     e.add_argument('--data', required=True)
     e.add_argument('--model', default=f'{MODELS}/detector_fp32.pt')
     e.add_argument('--backend', default='auto', choices=('auto', 'torch', 'onnxruntime'))
+    e.add_argument('--bootstrap', type=int, default=0, metavar='N',
+                   help='add 95%% confidence intervals (ci95) from N resamplings of the images')
     e.set_defaults(run=_eval)
     c = sub.add_parser('compress', help='prune + fine-tune, then int8 ONNX (static QDQ)')
     c.add_argument('--model', default=f'{MODELS}/detector_fp32.pt')
@@ -128,6 +141,8 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument('--distill-gain', type=float, default=1.0,
                    help='fine-tune also matching the unpruned model\'s outputs with this '
                         'weight (0: labels only)')
+    c.add_argument('--bf16', action='store_true',
+                   help='bfloat16 autocast for the fine-tuning\'s forward passes')
     c.set_defaults(run=_compress)
     q = sub.add_parser('quantize', help='int8 ONNX of a pruned model only (compress step 3)')
     q.add_argument('--model', default=f'{MODELS}/detector_pruned.pt')
@@ -153,7 +168,10 @@ def register(sub: 'argparse._SubParsersAction[Any]') -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv``, run the sub-command, print its JSON result; returns 0."""
-    a = parser().parse_args(argv)
+    ap = parser()
+    a = ap.parse_args(argv)
+    if getattr(a, 'grow_scales', None) and not a.init:
+        ap.error('--grow-scales needs --init (the model to grow)')
     if a.threads:
         import torch
         torch.set_num_threads(a.threads)
