@@ -193,6 +193,20 @@ def test_bootstrap_interval_has_the_binomial_width():
     assert [s['map50'] for s in again] == [s['map50'] for s in samples]
 
 
+def test_bootstrap_over_groups_spreads_as_the_groups_do():
+    # a group (a world) found or missed as a whole: the recall varies as the share of
+    # g groups found, sqrt(f (1 - f) / g), not as that of the images
+    g, per, f = 20, 6, 0.5
+    hit = np.random.default_rng().permutation(g) < f * g
+    gts = [np.array([[10.0, 10.0, 60.0, 60.0, 0]])] * (g * per)
+    preds = [np.array([[10.0, 10.0, 60.0, 60.0, 0.9, 0]]) if hit[i // per] else np.zeros((0, 6))
+             for i in range(g * per)]
+    lo, hi = confidence_intervals(bootstrap(preds, gts, resamples=100,
+                                            groups=np.arange(g * per) // per))['map50']
+    sd = np.sqrt(f * (1 - f) / g)
+    assert 0.6 * 2 * 1.96 * sd <= hi - lo <= 1.4 * 2 * 1.96 * sd
+
+
 def test_bootstrap_of_perfect_detections_is_one_everywhere():
     preds, gts = recall_set(50, 1.0, np.random.default_rng(0))
     ci = confidence_intervals(bootstrap(preds, gts, resamples=20))

@@ -2,9 +2,10 @@
 
 Every run of the suite renders its own scenes from seeds it draws (printed with any
 failure): no test scores a fixed draw that a model could have been chosen on. The
-training seeds are small numbers; the drawn ones are 10^6 or more. A few hundred scenes
-measure mAP to about a point, the width of the goals' margins, so a goal is checked
-against the draw's 95% bootstrap interval (images resampled): the test fails when the
+training seeds are small numbers; the drawn ones are 10^6 or more. A draw of a few hundred
+images (six per world) measures mAP only to two or three points, more than the goals'
+margins, so a goal is checked
+against the draw's 95% bootstrap interval (its worlds resampled): the test fails when the
 draw rejects the goal, not when a model that meets it draws unlucky scenes.
 """
 
@@ -26,7 +27,7 @@ from uav_tilt_vision.detector import Detector, load_model
 from uav_tilt_vision.metrics import bootstrap, mean_ap, percentile_interval
 from uav_tilt_vision.pipeline import VisionPipeline
 from uav_tilt_vision.target_pose import CameraIntrinsics
-from uav_tilt_vision.train import card_path, predict_set
+from uav_tilt_vision.train import card_path, predict_set, world_groups
 
 torch.set_num_threads(2)
 
@@ -61,87 +62,101 @@ def summary(res):
                                    res['map50_by_area']['small'])))
 
 
-@pytest.fixture(scope='module', params=tuple(DRAWS))
-def draw(request, tmp_path_factory):
-    """(name, seed, directory) of a set rendered for this run."""
-    name = request.param
+def scored_draw(name, tmp_path):
+    """{'name', 'seed', 'dir', and per model (fp32, pruned, int8): {'result': ``mean_ap``
+    result, 'summary': its goals' metrics, 'rows': (predictions, labels, ignore regions),
+    'groups': the world of each image}} of the draw ``name`` rendered for this run."""
     split, n, distance_m = DRAWS[name]
-    out = tmp_path_factory.mktemp(name)
-    dataset.generate(out, n, SEEDS[name], split=split, jobs=2, distance_m=distance_m,
+    dataset.generate(tmp_path, n, SEEDS[name], split=split, jobs=2, distance_m=distance_m,
                      show_progress=False)
-    return name, SEEDS[name], out
+    out = {'name': name, 'seed': SEEDS[name], 'dir': tmp_path}
+    models = {'fp32': (FP32, 'torch'), 'pruned': (PRUNED, 'torch'),
+              'int8': (INT8, 'onnxruntime')}
+    for model, (path, backend) in models.items():
+        rows = predict_set(load_detector(path, backend), tmp_path)
+        res = {**mean_ap(*rows), 'ignore_regions': sum(map(len, rows[2]))}
+        out[model] = {'result': res, 'summary': summary(res), 'rows': rows,
+                      'groups': world_groups(tmp_path, len(rows[1]))}
+    return out
 
 
 @pytest.fixture(scope='module')
-def scores(draw):
-    """{model: {'result': ``mean_ap`` result, 'summary': its goals' metrics, 'rows':
-    (predictions, labels, ignore regions)}} of fp32, pruned and int8 on the draw."""
-    models = {'fp32': (FP32, 'torch'), 'pruned': (PRUNED, 'torch'),
-              'int8': (INT8, 'onnxruntime')}
-    out = {}
-    for name, (path, backend) in models.items():
-        rows = predict_set(load_detector(path, backend), draw[2])
-        res = {**mean_ap(*rows), 'ignore_regions': sum(map(len, rows[2]))}
-        out[name] = {'result': res, 'summary': summary(res), 'rows': rows}
-    return out
+def heldout(tmp_path_factory):
+    return scored_draw('heldout', tmp_path_factory.mktemp('heldout'))
+
+
+@pytest.fixture(scope='module')
+def mission(tmp_path_factory):
+    return scored_draw('mission', tmp_path_factory.mktemp('mission'))
+
+
+@pytest.fixture(scope='module', params=tuple(DRAWS))
+def draw(request):
+    """Each of the drawn sets."""
+    return request.getfixturevalue(request.param)
 
 
 def interval(score, key, minus=None):
     """95% bootstrap interval of ``key`` of a model's score (of its difference with
-    ``minus``'s, resampled on the same images)."""
+    ``minus``'s, resampled on the same worlds)."""
     def resampled(sc):
         if 'samples' not in sc:
-            sc['samples'] = [summary(s) for s in bootstrap(*sc['rows'], RESAMPLES)]
+            sc['samples'] = [summary(s) for s in bootstrap(*sc['rows'], RESAMPLES,
+                                                           groups=sc['groups'])]
         return sc['samples']
     ref = resampled(minus) if minus else [dict.fromkeys(SUMMARY_KEYS, 0.0)] * RESAMPLES
     return percentile_interval(s[key] - r[key] for s, r in zip(resampled(score), ref))
 
 
-def test_the_drawn_sets_are_scored_with_their_ignore_regions(draw, scores):
-    name, seed, out = draw
-    meta = json.loads((out / 'meta.json').read_text())
-    assert meta['distance_m'] == list(DRAWS[name][2]) and meta['seed'] == seed >= 10**6
+def test_the_drawn_sets_are_scored_with_their_ignore_regions(draw):
+    meta = json.loads((draw['dir'] / 'meta.json').read_text())
+    assert meta['distance_m'] == list(DRAWS[draw['name']][2])
+    assert meta['seed'] == draw['seed'] >= 10**6
     assert meta['classes'][0] == 'bolt_plate'   # the target class, as summary() reads it
-    res = scores['int8']['result']
+    res = draw['int8']['result']
     assert res['backend'] == 'pycocotools' and res['ignore_regions'] > 0
 
 
-def test_map50_goal_on_held_out_scenes(draw, scores):
-    if draw[0] != 'heldout':
-        pytest.skip('the mAP goal is set on held-out scenes')
+def test_map50_goal_on_held_out_scenes(heldout):
     for model in ('fp32', 'int8'):
-        lo, hi = interval(scores[model], 'map50')
-        point = scores[model]['summary']['map50']
-        assert hi >= MAP50_GOAL, (draw[:2], model, point, (lo, hi))
+        lo, hi = interval(heldout[model], 'map50')
+        point = heldout[model]['summary']['map50']
+        assert hi >= MAP50_GOAL, (heldout['seed'], model, point, (lo, hi))
         assert lo <= point <= hi
 
 
-@pytest.mark.xfail(strict=True, reason=(
+def test_deployed_int8_within_one_point_of_fp32_on_held_out_scenes(heldout):
+    lo, hi = interval(heldout['fp32'], 'map50', minus=heldout['int8'])
+    assert lo <= INT8_BUDGET, (heldout['seed'], heldout['fp32']['summary'],
+                               heldout['int8']['summary'], (lo, hi))
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
     'not met: at 0.4-5 m the target class reaches AP@0.5 0.88 and small objects 0.89 '
-    '(fp32; int8 0.85, 0.86); docs/detector.md has what was tried'))
-def test_target_and_small_object_goals_at_every_mission_range(draw, scores):
-    if draw[0] != 'mission':
-        pytest.skip('these goals are set on the mission ranges')
+    '(fp32; int8 0.85, 0.86), int8 1.8 points below fp32; docs/detector.md has what '
+    'was tried'))
+def test_goals_at_every_mission_range(mission):
+    fp32 = mission['fp32']['summary']
     for model in ('fp32', 'int8'):
-        got = scores[model]['summary']
-        assert got['target_ap50'] >= TARGET_AP50_GOAL, (draw[:2], model, got)
-        assert got['small_ap50'] >= SMALL_AP50_GOAL, (draw[:2], model, got)
+        got = mission[model]['summary']
+        assert got['target_ap50'] >= TARGET_AP50_GOAL, (mission['seed'], model, got)
+        assert got['small_ap50'] >= SMALL_AP50_GOAL, (mission['seed'], model, got)
+        for key in SUMMARY_KEYS:
+            assert got[key] >= fp32[key] - INT8_BUDGET, (mission['seed'], model, key, got)
 
 
-def test_int8_quantization_loses_at_most_one_point(draw, scores):
+def test_int8_quantization_loses_at_most_one_point(draw):
     # the int8 model against the fp32 weights it was quantized from, on the same images
-    source, int8 = scores['pruned']['summary'], scores['int8']['summary']
+    source, int8 = draw['pruned']['summary'], draw['int8']['summary']
     for key in SUMMARY_KEYS:
-        assert int8[key] >= source[key] - INT8_BUDGET, (draw[:2], key, source, int8)
+        assert int8[key] >= source[key] - INT8_BUDGET, (draw['seed'], key, source, int8)
 
 
-def test_cli_eval_prints_map_and_its_interval(draw, scores, capsys):
-    if draw[0] != 'heldout':
-        pytest.skip('one set is enough for the CLI')
-    assert vision_cli.main(['eval', '--data', str(draw[2]), '--model', str(FP32),
+def test_cli_eval_prints_map_and_its_interval(heldout, capsys):
+    assert vision_cli.main(['eval', '--data', str(heldout['dir']), '--model', str(FP32),
                             '--bootstrap', '10']) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out['map50'] == pytest.approx(scores['fp32']['result']['map50'])
+    assert out['map50'] == pytest.approx(heldout['fp32']['result']['map50'])
     assert 0 <= out['map50_95'] <= out['map50'] and out['backend_used'] == 'torch'
     lo, hi = out['ci95']['map50']
     assert lo <= out['map50'] <= hi and out['ci95']['ap50_per_class']['bolt_plate']

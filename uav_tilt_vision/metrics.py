@@ -200,19 +200,23 @@ def pycocotools_map(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, A
 
 
 def bootstrap(preds: Rows, gts: Rows, ignores: Rows = None, resamples: int = 100,
-              seed: int = 0) -> list[dict[str, Any]]:
+              seed: int = 0, groups: ArrayLike | None = None) -> list[dict[str, Any]]:
     """``mean_ap`` of ``resamples`` draws of the images with replacement.
 
     Images, not objects, are resampled: objects of one scene share its camera and light.
-    The draws depend only on ``seed`` and the image count, so two models scored on one
-    set with one seed are paired draw by draw.
+    ``groups`` (one label per image) resamples whole groups instead: images of one world
+    share its wall, textures and lighting, so a set of a few worlds varies as a few. The
+    draws depend only on ``seed`` and the groups (or image count), so two models scored
+    on one set with one seed are paired draw by draw.
     """
     preds, gts = as_rows(preds, 6), as_rows(gts, 5)
     ignores = as_rows(ignores, 5, len(gts))
+    labels = np.arange(len(gts)) if groups is None else np.asarray(groups)
+    members = [np.flatnonzero(labels == g) for g in np.unique(labels)]
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(resamples):
-        idx = rng.integers(0, len(gts), len(gts))
+        idx = np.concatenate([members[k] for k in rng.integers(0, len(members), len(members))])
         out.append(mean_ap([preds[i] for i in idx], [gts[i] for i in idx],
                            [ignores[i] for i in idx]))
     return out

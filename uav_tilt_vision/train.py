@@ -248,6 +248,13 @@ def class_names(res: dict[str, Any], data_dir: str | os.PathLike[str]) -> dict[s
     return res
 
 
+def world_groups(data_dir: str | os.PathLike[str], n: int) -> np.ndarray | None:
+    """The world each of a rendered set's ``n`` images shows (``dataset``'s
+    ``images_per_world``), for ``metrics.bootstrap``; None for a set without it."""
+    per_world = read_meta(data_dir).get('images_per_world')
+    return np.arange(n) // per_world if per_world else None
+
+
 def evaluate(model: 'Detector | TorchDetector | OnnxDetector', data_dir: str | os.PathLike[str],
              conf_thres: float = 0.001, iou_thres: float = 0.6,
              batch: int = 16, resamples: int = 0) -> dict[str, Any]:
@@ -257,11 +264,14 @@ def evaluate(model: 'Detector | TorchDetector | OnnxDetector', data_dir: str | o
     The set's ignore regions (objects in view but too little visible to label) are COCO's
     crowd regions: detections on them are neither true nor false positives; the result
     counts them in 'ignore_regions'. With ``resamples`` > 0 it adds 'ci95', the 95%
-    bootstrap intervals of the metrics over that many resamplings of the images.
+    bootstrap intervals of the metrics over that many resamplings of the set's worlds
+    (``world_groups``; of its images where it does not say).
     """
     preds, gts, ignores = predict_set(model, data_dir, conf_thres, iou_thres, batch)
     res = {**mean_ap(preds, gts, ignores), 'ignore_regions': sum(len(i) for i in ignores)}
     if resamples > 0:
         res['ci95'] = class_names(
-            confidence_intervals(bootstrap(preds, gts, ignores, resamples)), data_dir)
+            confidence_intervals(bootstrap(preds, gts, ignores, resamples,
+                                           groups=world_groups(data_dir, len(gts)))),
+            data_dir)
     return class_names(res, data_dir)

@@ -108,7 +108,8 @@ def parser() -> argparse.ArgumentParser:
     t.add_argument('--init', help='continue from this checkpoint (its card is cited)')
     t.add_argument('--grow-scales', type=int, choices=(3, 4),
                    help='add finer heads to the --init model up to this many scales (their '
-                        'anchors: k-means on the set\'s labels); its other weights are kept')
+                        'anchors: k-means on the labels smaller than its smallest anchor); '
+                        'its other weights are kept')
     t.add_argument('--teacher', help='also learn to match this model\'s outputs (distillation; '
                                      'same classes, input size and anchors)')
     t.add_argument('--distill-gain', type=float, default=1.0,
@@ -125,7 +126,8 @@ def parser() -> argparse.ArgumentParser:
     e.add_argument('--model', default=f'{MODELS}/detector_fp32.pt')
     e.add_argument('--backend', default='auto', choices=('auto', 'torch', 'onnxruntime'))
     e.add_argument('--bootstrap', type=int, default=0, metavar='N',
-                   help='add 95%% confidence intervals (ci95) from N resamplings of the images')
+                   help='add 95%% confidence intervals (ci95) from N resamplings of the '
+                        'set\'s worlds')
     e.set_defaults(run=_eval)
     c = sub.add_parser('compress', help='prune + fine-tune, then int8 ONNX (static QDQ)')
     c.add_argument('--model', default=f'{MODELS}/detector_fp32.pt')
