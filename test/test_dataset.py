@@ -170,7 +170,8 @@ def test_random_crop_keeps_an_object_and_clips_boxes():
 def test_camera_looks_at_the_wall_from_the_asked_distance(distance_m):
     cam, client = CameraConfig(), p.connect(p.DIRECT)
     try:
-        rng = np.random.default_rng([12, int(distance_m[0] * 10)])
+        seed = int(np.random.default_rng().integers(2**31))
+        rng = np.random.default_rng(seed)
         info = dataset.build_random_world(Scene(client), rng, dataset.SPLITS['train'])
         n = info.R_map_wall[:, 2]
         for _ in range(40):
@@ -180,7 +181,7 @@ def test_camera_looks_at_the_wall_from_the_asked_distance(distance_m):
             # along the optical axis to the wall's plane: the drawn distance (the objects it aims
             # at stand out of the plane by their thickness, a few mm)
             t = (info.wall_origin_map - eye) @ n / (R_cam[:, 2] @ n)
-            assert distance_m[0] - 0.02 <= t <= distance_m[1] + 0.02, t
+            assert distance_m[0] - 0.02 <= t <= distance_m[1] + 0.02, (seed, t)
     finally:
         p.disconnect(client)
 
@@ -193,3 +194,14 @@ def test_cli_dataset_prints_json(tmp_path, capsys):
     assert out['distance_m'] == [1.0, 2.0]
     assert json.loads((tmp_path / 'meta.json').read_text())['distance_m'] == [1.0, 2.0]
     assert len(list((tmp_path / 'images').iterdir())) == 2
+
+
+@pytest.mark.parametrize('bad', [['dataset', '--out', 'x', '--n', '1', '--distance-m', '3', '1'],
+                                 ['dataset', '--out', 'x', '--n', '1', '--distance-m', '0', '1'],
+                                 ['eval', '--data', 'x', '--bootstrap', '-1']])
+def test_cli_refuses_bad_ranges_with_exit_2(bad, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as stop:
+        vision_cli.main(bad)
+    assert stop.value.code == 2 and 'must be' in capsys.readouterr().err
+    assert not (tmp_path / 'x').exists()

@@ -174,6 +174,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if getattr(a, 'grow_scales', None) and not a.init:
         ap.error('--grow-scales needs --init (the model to grow)')
+    if getattr(a, 'distance_m', None) and not 0.0 < a.distance_m[0] <= a.distance_m[1]:
+        ap.error(f'--distance-m must be 0 < MIN <= MAX, got {a.distance_m}')
+    if getattr(a, 'bootstrap', 0) < 0:
+        ap.error(f'--bootstrap must be 0 or more, got {a.bootstrap}')
     if a.threads:
         import torch
         torch.set_num_threads(a.threads)
