@@ -16,8 +16,8 @@ but not labelled (too little of them visible). They are COCO's crowd regions: ne
 and a detection of their class that matches no label but lies inside one at the IoU
 threshold (overlap measured as the share of the detection inside the region) is ignored.
 
-``bootstrap`` resamples the images to give these metrics' sampling spread: a set of a few
-hundred scenes decides a goal one point wide only with its confidence interval.
+``bootstrap`` resamples the images (or their worlds) to give these metrics' sampling
+spread: a set of a few hundred scenes decides a goal one point wide only with its interval.
 """
 
 import contextlib
