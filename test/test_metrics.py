@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from uav_tilt_vision.metrics import bootstrap, coco_map, confidence_intervals, mean_ap
+from uav_tilt_vision.metrics import (bootstrap, coco_map, confidence_intervals, mean_ap,
+                                     set_matches, summarize)
 
 GT = np.array([[0, 0, 10, 10, 0.0]])
 
@@ -166,6 +167,20 @@ def test_agrees_with_pycocotools(seed, with_ignores):
     assert ours['map50_95'] == pytest.approx(ref['map50_95'], abs=1e-9)
     assert ours['ap50_per_class'] == pytest.approx(ref['ap50_per_class'], abs=1e-9)
     assert ours['map50_by_area'] == pytest.approx(ref['map50_by_area'], abs=1e-9)
+
+
+@pytest.mark.parametrize('seed', [10, 11, 12])
+def test_a_weighted_set_scores_as_the_set_holding_each_image_that_often(seed):
+    # what a bootstrap draw computes from matches made once, against pycocotools (or
+    # coco_map) scoring the drawn set itself, duplicates and all
+    preds, gts = random_set(seed, n_img=20)
+    ignores = random_ignores(seed, preds)
+    weights = np.random.default_rng(seed).integers(0, 4, len(gts))
+    idx = np.repeat(np.arange(len(gts)), weights)
+    ref = mean_ap([preds[i] for i in idx], [gts[i] for i in idx], [ignores[i] for i in idx])
+    got = summarize(set_matches(preds, gts, ignores), weights)
+    for key in ('map50', 'map50_95', 'ap50_per_class', 'map50_by_area'):
+        assert got[key] == pytest.approx(ref[key], abs=1e-9), key
 
 
 def recall_set(n, found, rng):

@@ -42,7 +42,7 @@ DRAWS = {'heldout': ('heldout', 300, (0.4, 4.0)),
          'mission': ('train', 600, dataset.DISTANCE_M)}
 SEEDS = dict(zip(DRAWS, (int(s) for s in np.random.default_rng().integers(
     10**6, 2**31 - 1, size=len(DRAWS)))))
-RESAMPLES = 50
+RESAMPLES = 200
 # The spec's goals. mAP@0.5 >= 0.95 on held-out scenes; at every mission range the target
 # class AP@0.5 >= 0.95 and objects under 32 px a side AP@0.5 >= 0.93; the deployed int8
 # model within one point of fp32. Objects in view but too little visible to label are

@@ -22,6 +22,7 @@ spread: a set of a few hundred scenes decides a goal one point wide only with it
 
 import contextlib
 import io
+from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
 import numpy as np
@@ -61,20 +62,39 @@ def coco_map(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, Any]:
     {'map50', 'map50_95', 'ap50_per_class': {class id: AP@0.5}, 'map50_by_area': {range:
     mAP@0.5}}; nan (None for a range) where there is no ground truth to average over.
     """
+    return summarize(set_matches(preds, gts, ignores))
+
+
+def set_matches(preds: Rows, gts: Rows, ignores: Rows = None
+                ) -> dict[tuple[str | None, int], 'ClassMatches']:
+    """``class_matches`` of every class with ground truth, over all areas (key (None,
+    class)) and in each of ``AREA_RANGES`` (key (range name, class))."""
     preds, gts = as_rows(preds, 6), as_rows(gts, 5)
     ignores = as_rows(ignores, 5, len(gts))
     classes = np.unique(np.concatenate([g[:, 4] for g in gts])).astype(int)
-    if len(classes) == 0:
+    ranges: list[tuple[str | None, tuple[float, float]]] = [(None, (0.0, np.inf))]
+    ranges += AREA_RANGES.items()
+    return {(name, int(c)): class_matches(preds, gts, ignores, c, rng)
+            for name, rng in ranges for c in classes}
+
+
+def summarize(matches: dict[tuple[str | None, int], 'ClassMatches'],
+              weights: np.ndarray | None = None) -> dict[str, Any]:
+    """``coco_map``'s result from ``set_matches``, each image counted ``weights[i]`` times
+    (once without)."""
+    ap = {c: a for (name, c), m in matches.items() if name is None
+          if (a := matches_ap(m, weights)) is not None}   # classes with ground truth
+    if not ap:
         return {'map50': float('nan'), 'map50_95': float('nan'), 'ap50_per_class': {},
                 'map50_by_area': dict.fromkeys(AREA_RANGES)}
-    ap = np.array([class_ap(preds, gts, ignores, c) for c in classes])  # (classes, thresholds)
     by_area = {}
-    for name, rng in AREA_RANGES.items():
-        ap50 = [a[0] for a in (class_ap(preds, gts, ignores, c, rng) for c in classes)
-                if a is not None]
+    for name in AREA_RANGES:
+        ap50 = [a[0] for (n, _), m in matches.items() if n == name
+                if (a := matches_ap(m, weights, thresholds=1)) is not None]
         by_area[name] = float(np.mean(ap50)) if ap50 else None
-    return {'map50': float(ap[:, 0].mean()), 'map50_95': float(ap.mean()),
-            'ap50_per_class': {int(c): float(a) for c, a in zip(classes, ap[:, 0])},
+    table = np.array(list(ap.values()))   # (classes, thresholds)
+    return {'map50': float(table[:, 0].mean()), 'map50_95': float(table.mean()),
+            'ap50_per_class': {c: float(a[0]) for c, a in ap.items()},
             'map50_by_area': by_area}
 
 
@@ -84,33 +104,54 @@ def outside(boxes: np.ndarray, area_rng: Sequence[float]) -> np.ndarray:
     return (area < area_rng[0]) | (area > area_rng[1])
 
 
-def class_ap(preds: Sequence[np.ndarray], gts: Sequence[np.ndarray],
-             ignores: Sequence[np.ndarray], cls: int,
-             area_rng: Sequence[float] = (0.0, np.inf)) -> np.ndarray | None:
-    """AP of one class at every IoU threshold, shape (len(IOU_THRESHOLDS),).
+@dataclass(frozen=True)
+class ClassMatches:
+    """One class's detections over a set, matched image by image and sorted by descending
+    score: what COCOeval's accumulate step reads."""
 
-    Only ground truth whose area is in ``area_rng`` counts; None when there is none.
-    """
-    scores, matched, ignored = [], [], []
-    n_gt = 0
+    tp: np.ndarray        # (thresholds, D) bool: matched a ground truth at IoU >= t
+    ignored: np.ndarray   # (thresholds, D) bool: neither true nor false positive
+    image: np.ndarray     # (D,) int: the image of each detection
+    n_gt: np.ndarray      # (images,) int: counted ground truth of each image
+
+
+def class_matches(preds: Sequence[np.ndarray], gts: Sequence[np.ndarray],
+                  ignores: Sequence[np.ndarray], cls: int,
+                  area_rng: Sequence[float] = (0.0, np.inf)) -> ClassMatches:
+    """Match one class's detections image by image; only ground truth whose area is in
+    ``area_rng`` counts."""
+    scores, matched, ignored, n_gt = [], [], [], []
     for p, g, ig in zip(preds, gts, ignores):
         p = p[p[:, 5] == cls]
         p = p[np.argsort(-p[:, 4], kind='mergesort')][:MAX_DETS]
         g, ig = g[g[:, 4] == cls], ig[ig[:, 4] == cls]
         g_ignored = outside(g[:, :4], area_rng)
-        n_gt += int((~g_ignored).sum())
+        n_gt.append(int((~g_ignored).sum()))
         crowd = np.r_[np.zeros(len(g), bool), np.ones(len(ig), bool)]
         tp, d_ignored = match(p[:, :4], np.r_[g[:, :4], ig[:, :4]],
                               np.r_[g_ignored, np.ones(len(ig), bool)], crowd)
         scores.append(p[:, 4])
         matched.append(tp)
         ignored.append(d_ignored | (~tp & outside(p[:, :4], area_rng)))
+    image = np.repeat(np.arange(len(scores)), [len(s) for s in scores])
+    order = np.argsort(-np.concatenate(scores), kind='mergesort')
+    return ClassMatches(np.concatenate(matched, 1)[:, order],
+                        np.concatenate(ignored, 1)[:, order], image[order], np.array(n_gt))
+
+
+def matches_ap(m: ClassMatches, weights: np.ndarray | None = None,
+               thresholds: int = len(IOU_THRESHOLDS)) -> np.ndarray | None:
+    """AP at the first ``thresholds`` IoU thresholds, image i counted ``weights[i]`` times
+    (its detections repeated in score order, as in a set that holds it that often); None
+    without counted ground truth."""
+    tp, ignored = m.tp[:thresholds], m.ignored[:thresholds]
+    n_gt = int(m.n_gt.sum())
+    if weights is not None:
+        n_gt = int(m.n_gt @ weights)
+        tp, ignored = (np.repeat(a, weights[m.image], axis=1) for a in (tp, ignored))
     if n_gt == 0:
         return None
-    order = np.argsort(-np.concatenate(scores), kind='mergesort')
-    tp = np.concatenate(matched, 1)[:, order]
-    ignored_sorted = np.concatenate(ignored, 1)[:, order]
-    return np.array([interpolated_ap(t[~i], n_gt) for t, i in zip(tp, ignored_sorted)])
+    return np.array([interpolated_ap(t[~i], n_gt) for t, i in zip(tp, ignored)])
 
 
 def match(det: np.ndarray, gt: np.ndarray, gt_ignored: np.ndarray, crowd: np.ndarray
@@ -201,24 +242,24 @@ def pycocotools_map(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, A
 
 def bootstrap(preds: Rows, gts: Rows, ignores: Rows = None, resamples: int = 100,
               seed: int = 0, groups: ArrayLike | None = None) -> list[dict[str, Any]]:
-    """``mean_ap`` of ``resamples`` draws of the images with replacement.
+    """``coco_map``'s metrics of ``resamples`` draws of the images with replacement.
 
     Images, not objects, are resampled: objects of one scene share its camera and light.
     ``groups`` (one label per image) resamples whole groups instead: images of one world
     share its wall, textures and lighting, so a set of a few worlds varies as a few. The
     draws depend only on ``seed`` and the groups (or image count), so two models scored
-    on one set with one seed are paired draw by draw.
+    on one set with one seed are paired draw by draw. Detections are matched once; a draw
+    only counts each image as often as it was drawn.
     """
-    preds, gts = as_rows(preds, 6), as_rows(gts, 5)
-    ignores = as_rows(ignores, 5, len(gts))
+    gts = as_rows(gts, 5)
+    matches = set_matches(preds, gts, ignores)
     labels = np.arange(len(gts)) if groups is None else np.asarray(groups)
-    members = [np.flatnonzero(labels == g) for g in np.unique(labels)]
+    keys, group_of = np.unique(labels, return_inverse=True)
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(resamples):
-        idx = np.concatenate([members[k] for k in rng.integers(0, len(members), len(members))])
-        out.append(mean_ap([preds[i] for i in idx], [gts[i] for i in idx],
-                           [ignores[i] for i in idx]))
+        drawn = np.bincount(rng.integers(0, len(keys), len(keys)), minlength=len(keys))
+        out.append(summarize(matches, drawn[group_of]))
     return out
 
 
