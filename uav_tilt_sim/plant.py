@@ -4,6 +4,7 @@ No ROS here. :class:`Plant` steps one 300 Hz control tick (4 physics substeps at
 for a given :class:`ActuatorCommand` and exposes truth, noisy sensors and the camera.
 """
 import dataclasses
+import math
 
 import numpy as np
 import pybullet as p
@@ -107,8 +108,11 @@ class Plant:
         self._wind_rng = np.random.default_rng([scenario.seed, RNG_WIND])
         self.sensors = SensorModel(scenario.noise, scenario.seed)
         self._sensed = None         # (tick, TickSensors) of the last read
+        # the gust is first-order Gauss-Markov: decay and innovation gain per physics step
         self._gust = np.zeros(3)
         self._gust_decay = np.exp(-self.dt_physics / scenario.wind.gust_tau_s)
+        self._gust_gain = scenario.wind.gust_std_m_s * np.sqrt(1 - self._gust_decay ** 2)
+        self._wind_mean_map = np.asarray(scenario.wind.mean_m_s, dtype=float)
         self.tick = 0
         self._prev_v_map = np.zeros(3)
         self._contact_force_map = np.zeros(3)
@@ -188,14 +192,11 @@ class Plant:
 
     def _air_force(self, vel_map):
         """Quadratic drag against the air moving at mean wind + gust."""
-        wind = self.scenario.wind
-        std = wind.gust_std_m_s
-        if std > 0.0:
-            a = self._gust_decay
-            self._gust = (a * self._gust
-                          + std * np.sqrt(1 - a * a) * self._wind_rng.standard_normal(3))
-        rel = np.asarray(wind.mean_m_s) + self._gust - vel_map
-        return wind.drag_n_s2_per_m2 * np.linalg.norm(rel) * rel
+        if self._gust_gain > 0.0:
+            self._gust = (self._gust_decay * self._gust
+                          + self._gust_gain * self._wind_rng.standard_normal(3))
+        rel = self._wind_mean_map + self._gust - vel_map
+        return self.scenario.wind.drag_n_s2_per_m2 * math.sqrt(rel @ rel) * rel
 
     def _tilts(self):
         states = p.getJointStates(self.body, self._arm_joints, physicsClientId=self.client)

@@ -6,8 +6,8 @@ another's noise, nor the wind (stream 0, uav_tilt_sim.plant).
 """
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
+from uav_tilt_common.geometry import quat_multiply, rotvec_to_quat
 from uav_tilt_common.state import VehicleState
 from uav_tilt_sim.scenario import NoiseConfig
 
@@ -49,9 +49,9 @@ class SensorModel:
         gyro's, from the odometry's own stream)."""
         q = truth.q_map_base
         if self.noise.odom_att_rad > 0.0:
-            delta = Rotation.from_rotvec(self._add('odometry', np.zeros(3),
-                                                   self.noise.odom_att_rad))
-            q = (Rotation.from_quat(q) * delta).as_quat()
+            # geometry's per-tick helpers: scipy's Rotation was a sixth of a tick here
+            delta = rotvec_to_quat(self._add('odometry', np.zeros(3), self.noise.odom_att_rad))
+            q = quat_multiply(q, delta)
         return VehicleState(truth.t_s, self._add('odometry', truth.p_map, self.noise.odom_pos_m),
                             np.asarray(q, dtype=float),
                             self._add('odometry', truth.v_map, self.noise.odom_vel_m_s),
