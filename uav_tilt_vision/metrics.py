@@ -56,6 +56,17 @@ def as_rows(arrays: Rows, width: int, n: int = 0) -> list[np.ndarray]:
     return [np.asarray(a, dtype=np.float64).reshape(-1, width) for a in arrays]
 
 
+@dataclass(frozen=True)
+class ClassMatches:
+    """One class's detections over a set, matched image by image and sorted by descending
+    score: what COCOeval's accumulate step reads."""
+
+    tp: np.ndarray        # (thresholds, D) bool: matched a ground truth at IoU >= t
+    ignored: np.ndarray   # (thresholds, D) bool: neither true nor false positive
+    image: np.ndarray     # (D,) int: the image of each detection
+    n_gt: np.ndarray      # (images,) int: counted ground truth of each image
+
+
 def coco_map(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, Any]:
     """COCO bbox mAP (101-point interpolated AP).
 
@@ -66,7 +77,7 @@ def coco_map(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, Any]:
 
 
 def set_matches(preds: Rows, gts: Rows, ignores: Rows = None
-                ) -> dict[tuple[str | None, int], 'ClassMatches']:
+                ) -> dict[tuple[str | None, int], ClassMatches]:
     """``class_matches`` of every class with ground truth, over all areas (key (None,
     class)) and in each of ``AREA_RANGES`` (key (range name, class))."""
     preds, gts = as_rows(preds, 6), as_rows(gts, 5)
@@ -78,7 +89,7 @@ def set_matches(preds: Rows, gts: Rows, ignores: Rows = None
             for name, rng in ranges for c in classes}
 
 
-def summarize(matches: dict[tuple[str | None, int], 'ClassMatches'],
+def summarize(matches: dict[tuple[str | None, int], ClassMatches],
               weights: np.ndarray | None = None) -> dict[str, Any]:
     """``coco_map``'s result from ``set_matches``, each image counted ``weights[i]`` times
     (once without)."""
@@ -102,17 +113,6 @@ def outside(boxes: np.ndarray, area_rng: Sequence[float]) -> np.ndarray:
     """(N,) bool: the area (px^2) of an xyxy box is outside the inclusive ``area_rng``."""
     area = box_area(boxes)
     return (area < area_rng[0]) | (area > area_rng[1])
-
-
-@dataclass(frozen=True)
-class ClassMatches:
-    """One class's detections over a set, matched image by image and sorted by descending
-    score: what COCOeval's accumulate step reads."""
-
-    tp: np.ndarray        # (thresholds, D) bool: matched a ground truth at IoU >= t
-    ignored: np.ndarray   # (thresholds, D) bool: neither true nor false positive
-    image: np.ndarray     # (D,) int: the image of each detection
-    n_gt: np.ndarray      # (images,) int: counted ground truth of each image
 
 
 def class_matches(preds: Sequence[np.ndarray], gts: Sequence[np.ndarray],
