@@ -10,7 +10,9 @@ A message's log time is when the recorder got it by the node's clock: sim time (
 with ``use_sim_time``, as scripts/launch.sh starts it (messages that come before the first
 /clock get the time of that first /clock), else the wall clock. The file is completed on
 shutdown (SIGINT/SIGTERM), its size reported, and flushed chunk by chunk while recording,
-so even a killed recorder leaves its flushed chunks readable.
+so even a killed recorder leaves its flushed chunks readable. Served by rclpy's
+EventsExecutor (:mod:`uav_tilt_common.ros_spin`): some 1,700 messages a second in a real-time
+mission cost it 34% of a core with the default executor, 15% with this one.
 """
 import dataclasses
 import os
@@ -25,6 +27,7 @@ from rclpy.node import Node
 from uav_tilt_common import names
 from uav_tilt_common.config import param
 from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_tools import topic_graph
 from uav_tilt_tools.mcap_bag import McapBag
 
@@ -167,7 +170,7 @@ def main(args=None):
     # no-op there keeps KeyboardInterrupt from landing inside a half-written MCAP record,
     # and spin returns between callbacks instead.
     signal.signal(signal.SIGINT, lambda *_: None)
-    return run_node(RecorderNode, args)
+    return run_node(RecorderNode, args, spin=spin_events)
 
 
 if __name__ == '__main__':
