@@ -62,7 +62,11 @@ class SensorModel:
         std = self.noise.depth_m
         if std <= 0.0:
             return depth_m
+        # float32 draws and in-place products: a float64 image's draw was 1.8 ms a frame
+        noisy = self.rngs['depth'].standard_normal(depth_m.shape, dtype=np.float32)
         with np.errstate(invalid='ignore'):     # inf (nothing seen) stays inf below
-            noisy = depth_m + (std * depth_m ** 2 * self.rngs['depth'].standard_normal(
-                depth_m.shape)).astype(np.float32)
+            noisy *= depth_m
+            noisy *= depth_m
+            noisy *= np.float32(std)
+            noisy += depth_m
         return np.where(np.isfinite(depth_m), noisy, depth_m)
