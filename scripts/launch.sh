@@ -10,7 +10,8 @@
 # Ctrl-C or SIGTERM sends SIGINT to every node (as ros2 launch
 # does: every node shuts down cleanly on it); nodes still running after UAV_TILT_GRACE_S
 # (5, whole) seconds are killed. Should this script be killed outright (SIGKILL), its
-# nodes get SIGTERM from the kernel (UAV_TILT_PARENT_PID, uav_tilt_common/parent_watch.py).
+# nodes get SIGTERM from the kernel (UAV_TILT_PARENT_PID, uav_tilt_common/parent_watch.py)
+# and end themselves after the same grace should their shutdown hang.
 # Exit 0 only when every node stopped cleanly and, with --mission, the mission succeeded.
 # --vision-only starts vision alone: the companion computer's side of a two-computer run,
 # whose other side is --no-vision. --param sets one parameter of one node (plant,
@@ -33,6 +34,8 @@ fi
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 CONFIG=$REPO/config
 GRACE_S=${UAV_TILT_GRACE_S:-5}
+# A node whose shutdown hangs after this script was killed ends itself after the same grace.
+export UAV_TILT_GRACE_S=$GRACE_S
 
 scenario='' realtime=0 record='' mission='' plan='' foxglove=0 vision=1 target_source=''
 vision_only=0

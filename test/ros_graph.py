@@ -21,6 +21,15 @@ def start(module, *args, params=None, log_path=None):
                             env=dict(os.environ, PYTHONUNBUFFERED='1'))
 
 
+def alive(pid):
+    """Whether ``pid`` runs (a zombie waiting for its new parent to reap it does not)."""
+    try:
+        with open(f'/proc/{pid}/stat') as stream:
+            return stream.read().rsplit(')', 1)[1].split()[0] != 'Z'
+    except (OSError, IndexError):
+        return False
+
+
 def stop(proc, timeout_s=5.0):
     """SIGINT a process and return (exit code, seconds it took); kill it if it hangs."""
     if proc.poll() is not None:

@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from ros_graph import REPO, status_values
+from ros_graph import REPO, alive, status_values
 from uav_tilt_common import names, ros_qos
 from uav_tilt_sim.camera import CameraConfig
 from uav_tilt_tools.mission_watch import MissionWatch
@@ -43,15 +43,6 @@ def children(pid):
         except (OSError, ValueError, IndexError):
             continue        # not a process, or it is gone already
     return found
-
-
-def alive(pid):
-    """Whether ``pid`` runs (a zombie waiting for its new parent to reap it does not)."""
-    try:
-        with open(f'/proc/{pid}/stat') as stream:
-            return stream.read().rsplit(')', 1)[1].split()[0] != 'Z'
-    except (OSError, IndexError):
-        return False
 
 
 def report(run_dir):
@@ -153,7 +144,7 @@ def test_a_killed_launch_takes_its_nodes_and_leaves_a_recording_to_report(tmp_pa
         os.kill(launch.pid, signal.SIGKILL)
         launch.wait()
         killed = time.monotonic()
-        while any(alive(pid) for pid in nodes) and time.monotonic() - killed < 5.0:
+        while any(alive(pid) for pid in nodes) and time.monotonic() - killed < SHUTDOWN_S:
             time.sleep(0.1)
         left = {pid: cmd for pid, cmd in nodes.items() if alive(pid)}
     finally:

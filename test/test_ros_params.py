@@ -11,6 +11,7 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
+from ros_graph import alive
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.ros_params import declare_config, note_sigint
 
@@ -128,3 +129,45 @@ def test_the_parent_watch(parent, code, out):
     result = subprocess.run([sys.executable, '-c', PARENT_CHECK], env=env, capture_output=True,
                             text=True, timeout=60)
     assert (result.returncode, result.stdout.strip()) == (code, out)
+
+
+# A node started by a launcher, whose shutdown hangs: SIGTERM (the parent-death signal) is
+# ignored and the main thread sleeps on.
+HUNG_NODE = ('import signal, sys, time; from uav_tilt_common import parent_watch; '
+             'assert parent_watch.die_with_parent(); '
+             'signal.signal(signal.SIGTERM, signal.SIG_IGN); '
+             'print("armed", file=sys.stderr, flush=True); time.sleep(120)')
+# The launcher: exports its pid and grace as launch.sh does, starts the node, prints its pid.
+LAUNCHER = ('import os, subprocess, sys, time; '
+            'os.environ["UAV_TILT_PARENT_PID"] = str(os.getpid()); '
+            'os.environ["UAV_TILT_GRACE_S"] = sys.argv[1]; '
+            'node = subprocess.Popen([sys.executable, "-c", sys.argv[2]], '
+            'stderr=open(sys.argv[3], "w")); '
+            'print(node.pid, flush=True); time.sleep(120)')
+
+
+@pytest.mark.parametrize('grace_s', [0.5, 2.0])
+def test_a_node_whose_shutdown_hangs_ends_itself_after_the_grace(tmp_path, grace_s):
+    log_path = tmp_path / 'node.log'
+    launcher = subprocess.Popen([sys.executable, '-c', LAUNCHER, str(grace_s), HUNG_NODE,
+                                 str(log_path)], stdout=subprocess.PIPE, text=True)
+    node = int(launcher.stdout.readline())
+    try:
+        deadline = time.monotonic() + 60.0
+        while 'armed' not in log_path.read_text() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert 'armed' in log_path.read_text(), log_path.read_text()
+        launcher.kill()
+        launcher.wait()
+        killed = time.monotonic()
+        while alive(node) and time.monotonic() - killed < grace_s + 10.0:
+            time.sleep(0.02)
+        took_s = time.monotonic() - killed
+    finally:
+        launcher.kill()
+        if alive(node):
+            os.kill(node, signal.SIGKILL)
+    log = log_path.read_text()
+    # Given its grace to shut down cleanly, and not much more: the stacks say where it hung.
+    assert grace_s <= took_s < grace_s + 3.0, (took_s, log)
+    assert 'parent (pid' in log and 'Timeout' in log and '(most recent call first)' in log
