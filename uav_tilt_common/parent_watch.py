@@ -28,23 +28,22 @@ def die_with_parent() -> bool:
     pid = os.environ.pop(PARENT_ENV, '')
     if not pid.isdigit() or not sys.platform.startswith('linux'):
         return False
-    parent_fd = None
-    try:
-        parent_fd = os.pidfd_open(int(pid))
-    except ProcessLookupError:      # gone (and reaped) already
-        sys.exit(128 + signal.SIGTERM)
-    except OSError:                 # no pidfd (Linux < 5.3): the signal alone, no backstop
-        pass
+    parent = int(pid)
     libc = ctypes.CDLL(None, use_errno=True)
     if libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) != 0:
         print(f'[parent_watch] prctl(PR_SET_PDEATHSIG) failed: '
               f'{os.strerror(ctypes.get_errno())}', file=sys.stderr, flush=True)
         return False
-    if os.getppid() != int(pid):     # it died before the signal was armed
+    if os.getppid() != parent:     # it died before the signal was armed
         sys.exit(128 + signal.SIGTERM)
-    if parent_fd is not None:
-        threading.Thread(target=_end_after_grace, args=(parent_fd, int(pid), _grace_s()),
-                         daemon=True, name='parent_watch').start()
+    try:
+        parent_fd = os.pidfd_open(parent)
+    except ProcessLookupError:     # it died (and was reaped) since
+        sys.exit(128 + signal.SIGTERM)
+    except OSError:                # no pidfd (Linux < 5.3): the signal alone, no backstop
+        return True
+    threading.Thread(target=_end_after_grace, args=(parent_fd, parent, _grace_s()),
+                     daemon=True, name='parent_watch').start()
     return True
 
 
