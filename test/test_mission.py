@@ -154,7 +154,7 @@ def test_references_are_consistent_and_speed_limited():
         v_map = sp.R_map_t @ sp.dlambda_d_t
         a_map = sp.R_map_t @ sp.ddlambda_d_t
         assert np.linalg.norm(v_map) <= v_max * (1 + 1e-9)
-        if phase in ('touch', 'press'):
+        if phase in ('touch', 'align', 'press'):
             # by design not a smooth segment: a guarded move at constant speed, then a
             # quasi-static press whose depth starts with the contact threshold's share
             prev = None
@@ -162,7 +162,7 @@ def test_references_are_consistent_and_speed_limited():
             # trapezoidal rule: the error is bounded by the jerk, tiny for these segments
             assert np.allclose(p_map - prev[0], 0.5 * (v_map + prev[1]) * DT_S, atol=1e-5)
             assert np.allclose(v_map - prev[1], 0.5 * (a_map + prev[2]) * DT_S, atol=1e-4)
-        if phase not in ('touch', 'press'):
+        if phase not in ('touch', 'align', 'press'):
             prev = (p_map, v_map, a_map)
 
 
@@ -379,3 +379,64 @@ def test_min_jerk_boundary_conditions():
 def test_inconsistent_timeouts_rejected():
     with pytest.raises(ConfigError, match='target_lost_retreat_s'):
         Mission(VEHICLE, MissionConfig(target_lost_hold_s=2.0, target_lost_retreat_s=1.0))
+
+
+def _touching_with_offset(cfg, offset_map):
+    """A flight in CONTACT's creep whose tracker leaves the body ``offset_map`` off its
+    reference from now on (a gust), settled for the alignment filter."""
+    flight = _in_mode(Mode.CONTACT, cfg)
+    flight.run_until(lambda f: f.mission.phase == 'touch', 30.0)
+    track = flight._track
+
+    def off_track(sp):
+        track(sp)
+        flight.p = flight.p + offset_map
+    flight._track = off_track
+    return flight
+
+
+def _creep_depth(flight):
+    """The creep reference's coordinate along the wall's normal (z_t)."""
+    return flight.log[-1][2].lambda_d_t[2]
+
+
+@pytest.mark.parametrize('offset_m, pauses', [(0.01, True), (0.002, False)])
+def test_the_touch_waits_for_the_tool_over_the_target(offset_m, pauses):
+    cfg = MissionConfig()
+    # the wall is x = 3 (normal -x): z in map lies in its plane
+    flight = _touching_with_offset(cfg, np.array([0.0, 0.0, offset_m]))
+    flight.run_for(0.5)
+    z0 = _creep_depth(flight)
+    flight.run_for(1.0)
+    crept_m = z0 - _creep_depth(flight)
+    if pauses:
+        # off by more than touch_align_m: the creep stands still, and says so
+        assert flight.mission.phase == 'align' and crept_m == pytest.approx(0.0, abs=1e-9)
+        assert not np.any(flight.log[-1][2].dlambda_d_t)
+    else:
+        assert flight.mission.phase == 'touch'
+        assert crept_m == pytest.approx(cfg.touch_speed_m_s * 1.0, rel=0.02)
+    # the gust over, the creep goes on to the wall and the push
+    flight._track = Flight._track.__get__(flight)
+    flight.run_to(Mode.HOLD, timeout_s=30.0)
+
+
+def _touch_s(cfg, offset_m):
+    """Seconds from the creep's start to the press, the body held ``offset_m`` above its
+    reference (in the wall's plane)."""
+    flight = _touching_with_offset(cfg, np.array([0.0, 0.0, offset_m]))
+    start_s = flight.t_s
+    flight.run_until(lambda f: f.mission.phase == 'press', 30.0)
+    return flight.t_s - start_s
+
+
+def test_the_touch_waits_no_longer_than_allowed():
+    cfg = MissionConfig(touch_align_wait_s=1.5)
+    # an offset that stays does not stall the touch: it costs the wait allowed, no more
+    assert _touch_s(cfg, 0.02) - _touch_s(cfg, 0.0) == pytest.approx(1.5, abs=2 * DT_S)
+
+
+def test_the_touch_alignment_can_be_turned_off():
+    flight = _touching_with_offset(MissionConfig(touch_align_m=0.0), np.array([0.0, 0.0, 0.02]))
+    flight.run_until(lambda f: f.mission.phase == 'press', 30.0)
+    assert 'align' not in flight.phases

@@ -40,6 +40,9 @@ NEAR_WALL = (Mode.APPROACH, Mode.CONTACT, Mode.HOLD, Mode.SLIDE, Mode.TARGET_LOS
 IN_TARGET_FRAME = NEAR_WALL + (Mode.RETREAT,)
 # A task that did not end: the plan stopped before it, or while it ran.
 NOT_RUN = 'not_run'
+# The touch's alignment check low-passes the tool tip's offset with this time constant:
+# odometry noise (a few mm at the tool's lever arm) averages out, a gust's drift does not.
+ALIGN_TAU_S = 0.1
 
 
 @dataclasses.dataclass
@@ -79,6 +82,12 @@ class MissionConfig:
     touch_speed_m_s: float = param(0.01, lo=0.001, hi=0.2)
     touch_overrun_m: float = param(0.1, lo=0.0, hi=1.0)     # creep past the estimate, at most
     touch_threshold_n: float = param(0.4, lo=0.05, hi=20.0)  # the first touch
+    # Friction holds the tool where it first touches (mu F_c is far above what the contact
+    # stiffness along the wall pulls with): the creep pauses while the tool tip (odometry)
+    # is more than touch_align_m off the target in the wall's plane (a gust), for at most
+    # touch_align_wait_s in all. 0 turns the pause off.
+    touch_align_m: float = param(0.004, lo=0.0, hi=0.1)
+    touch_align_wait_s: float = param(5.0, lo=0.0, hi=60.0)
     press_time_s: float = param(2.0, lo=0.1, hi=30.0)
     # HOLD: the measured push corrects the depth with this time constant, so that a soft
     # wall (which gives way) still gets the setpoint; 0 disables the correction.
@@ -236,6 +245,9 @@ class Mission:
         self._landing_since_s = None
         self._contact_ticks = 0
         self._contact_phase = ''       # CONTACT: 'close', 'touch', 'press'
+        self._aligning = False         # CONTACT touch: the creep paused (touch_align_m)
+        self._align_waited_s = 0.0
+        self._align_off_t = None        # the tool tip off the target (x_t, y_t), filtered
         self._hover_phase = ''         # HOVER: 'transit' while flying to the next task
         self._drop_target = drop_target
         self._search = SearchState()
@@ -261,12 +273,16 @@ class Mission:
     @property
     def phase(self):
         """What the mode is doing: SEARCH 'sweep', 'climb', 'confirm', 'closer'; CONTACT
-        'close', 'touch', 'press'; HOVER 'transit' (to the next task); '' otherwise."""
+        'close', 'touch' ('align' while the creep waits for the tool tip to come back over
+        the target), 'press'; HOVER 'transit' (to the next task); '' otherwise."""
         if self._mode == Mode.SEARCH:
             return self._search.phase
         if self._mode == Mode.HOVER:
             return self._hover_phase
-        return self._contact_phase if self._mode == Mode.CONTACT else ''
+        if self._mode != Mode.CONTACT:
+            return ''
+        return 'align' if self._contact_phase == 'touch' and self._aligning else \
+            self._contact_phase
 
     @property
     def task(self):
@@ -638,6 +654,7 @@ class Mission:
         elif phase == 'close' and self._traj.done(self._now_s):
             self._start_touch()
         elif phase == 'touch':
+            self._align_touch()
             self.first_touch_peak_n = max(self.first_touch_peak_n, f_n)
             self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.touch_threshold_n else 0
             if self._contact_ticks >= cfg.contact_detect_ticks:
@@ -658,10 +675,30 @@ class Mission:
         cfg = self.config
         self._contact_phase = 'touch'
         self._contact_ticks = 0
+        self._aligning, self._align_waited_s, self._align_off_t = False, 0.0, None
         p, _ = self._ref_t()
         self._traj = Ramp(self._now_s, p, [0.0, 0.0, -cfg.touch_speed_m_s],
                           (cfg.touch_margin_m + cfg.touch_overrun_m) / cfg.touch_speed_m_s)
         self._event('touching')
+
+    def _align_touch(self):
+        """Pause the creep (its clock stands still) while the tool tip is off the target
+        in the wall's plane, within the wait allowed."""
+        cfg = self.config
+        dt = 0.0 if self._last_tick_s is None else max(self._now_s - self._last_tick_s, 0.0)
+        p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
+        off_t = (p_t + self._tool_t())[:2]
+        if self._align_off_t is None:
+            self._align_off_t = off_t
+        else:
+            self._align_off_t = self._align_off_t + (1.0 - math.exp(-dt / ALIGN_TAU_S)) * (
+                off_t - self._align_off_t)
+        off_m = float(np.linalg.norm(self._align_off_t))
+        self._aligning = (cfg.touch_align_m > 0.0 and off_m > cfg.touch_align_m
+                          and self._align_waited_s + dt <= cfg.touch_align_wait_s)
+        if self._aligning:
+            self._align_waited_s += dt
+            self._traj.t0_s += dt
 
     def _start_press(self):
         """Ramp the depth that pushes with the setpoint, from one that holds the tool on the
@@ -945,6 +982,8 @@ class Mission:
             # a quasi-static press: with the reference's own speed in C e' + M e'' the push
             # would overshoot by C times that speed halfway through the ramp
             v[2] = a[2] = 0.0
+        if self.phase == 'align':
+            v[:] = 0.0      # paused: the reference stands still, and so does its speed
         # leaving the wall, the reference starts behind the surface: keep the compliant
         # gains until it is out, so the push fades instead of stiffening
         releasing = self._mode == Mode.RETREAT and p[2] < self.vehicle.tool_tip_x_m

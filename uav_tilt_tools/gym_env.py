@@ -35,8 +35,9 @@ error e, e' of the noisy odometry against the setpoint in the target frame of th
 estimate; ``tip_t`` (3,) the tool tip in that frame (x, y along the wall from the POI,
 z off the surface); ``wrench`` (6,) the F/T reading (ee_link, N and N m); ``push_error_n``
 (1,) the measured push along the normal minus the setpoint; ``phase`` Discrete(5) (close,
-touch, press, hold, other); with ``camera=True`` also ``image`` (H, W, 3) uint8, the
-eye-in-hand camera at the end of the step. ``render_mode='rgb_array'`` renders that camera.
+touch (with CONTACT's ``align`` pauses), press, hold, other); with ``camera=True`` also
+``image`` (H, W, 3) uint8, the eye-in-hand camera at the end of the step.
+``render_mode='rgb_array'`` renders that camera.
 
 **Reward** (from the simulator's truth): each control tick in HOLD earns
 :func:`touch_reward` = 1 - ((push - F_d) / force_scale_n)^2 - poi_error / poi_scale_m
@@ -303,8 +304,10 @@ class ContactInspectionEnv(gym.Env):
         mission = self.flight.core.mission
         if mission.mode == Mode.HOLD:
             return PHASES.index('hold')
-        if mission.mode == Mode.CONTACT and mission.phase in PHASES:
-            return PHASES.index(mission.phase)
+        # the creep's pause for the tool to come back over the target is part of the touch
+        phase = 'touch' if mission.phase == 'align' else mission.phase
+        if mission.mode == Mode.CONTACT and phase in PHASES:
+            return PHASES.index(phase)
         return PHASES.index('other')
 
     def _image(self):
