@@ -8,10 +8,10 @@ from uav_tilt_control.disturbance import DisturbanceConfig, DisturbanceObserver
 MASS_KG, TAU_S, DT_S = 1.6, 0.025, 1.0 / 300.0
 
 
-def _run(f_ext, f_contact, seconds=2.0, config=None, yaw=0.4):
+def _run(f_ext, f_contact, seconds=2.0, config=None, yaw=0.4, airborne=True):
     """A point mass under a thrust that follows its command with the rotor lag, an external
     force and a contact force; the observer sees the IMU's specific force and the F/T."""
-    obs = DisturbanceObserver(MASS_KG, TAU_S, config or DisturbanceConfig(axes=[1, 1, 1]))
+    obs = DisturbanceObserver(MASS_KG, TAU_S, config or DisturbanceConfig())
     R = Rotation.from_euler('z', yaw).as_matrix()
     thrust = np.array([0.0, 0.0, MASS_KG * 9.81])
     rng = np.random.default_rng(0)
@@ -20,7 +20,7 @@ def _run(f_ext, f_contact, seconds=2.0, config=None, yaw=0.4):
         obs.commanded(cmd)
         thrust = thrust + (1 - np.exp(-DT_S / TAU_S)) * (cmd - thrust)
         specific = R.T @ (thrust + f_ext + f_contact) / MASS_KG + rng.normal(0, 0.02, 3)
-        obs.update(R, specific, f_contact, DT_S)
+        obs.update(R, specific, f_contact, DT_S, airborne)
     return obs.f_ext_map
 
 
@@ -39,3 +39,10 @@ def test_axes_bound_and_off():
              config=DisturbanceConfig(axes=[1, 1, 0], limit_n=1.0))
     assert f[2] == 0.0 and np.linalg.norm(f) == pytest.approx(1.0)
     assert np.all(_run(np.ones(3), np.zeros(3), config=DisturbanceConfig(tau_s=0.0)) == 0.0)
+
+
+def test_on_the_ground_the_vertical_axis_is_off():
+    # the ground's reaction (here the whole weight the thrust does not carry) is no wind
+    weight = np.array([0.0, 0.0, MASS_KG * 9.81])
+    f = _run(np.array([0.5, -0.2, 0.0]) + weight, np.zeros(3), airborne=False)
+    np.testing.assert_allclose(f, [0.5, -0.2, 0.0], atol=0.03)

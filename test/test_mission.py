@@ -121,6 +121,10 @@ def test_happy_path_visits_every_mode_and_succeeds(target):
     by_mode = {}
     for t, mode, sp, p in flight.log:
         by_mode.setdefault(mode, []).append((t, sp, p))
+    # the ground may carry the vehicle before and while it takes off and lands, not between
+    airborne = {mode: {sp.airborne for _, sp, _ in ticks} for mode, ticks in by_mode.items()}
+    assert [airborne.pop(m) for m in (Mode.IDLE, Mode.TAKEOFF, Mode.LAND)] == [{False}] * 3
+    assert all(flags == {True} for flags in airborne.values())
     # the standoff point: tool tip standoff_m from the surface, on the normal through the POI
     _, sp_end, p_end = by_mode[Mode.APPROACH][-1]
     r = p_end - target.p_poi_map

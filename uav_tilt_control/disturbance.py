@@ -10,6 +10,10 @@ force nobody commanded or measured: drag from wind and gusts, a mass error in
 accelerations. Low-pass filtered, it is fed back with the opposite sign by the impedance law,
 so the vehicle holds its reference against wind while the contact force, measured and thus
 not in F_ext, still meets the compliance of eq. (6) (the push stays K_z times the depth).
+
+On the ground (and while leaving or meeting it) the ground's reaction is a force nobody
+measures either: there the vertical axis is off and the hover-thrust estimator alone
+learns the weight.
 """
 import dataclasses
 import math
@@ -18,6 +22,8 @@ import numpy as np
 
 from uav_tilt_common.config import param
 
+_HORIZONTAL = np.array([1.0, 1.0, 0.0])
+
 
 @dataclasses.dataclass
 class DisturbanceConfig:
@@ -25,9 +31,9 @@ class DisturbanceConfig:
 
     tau_s: float = param(0.15, lo=0.0, hi=10.0)          # low-pass time constant
     limit_n: float = param(4.0, lo=0.0, hi=100.0)        # bound of |F_ext| fed back
-    # The vertical share is left to the hover-thrust estimator, which learns a weight error
-    # without the observer's transient mass-times-acceleration errors.
-    axes: list = param([1.0, 1.0, 0.0], lo=0.0, hi=1.0, length=3)   # map x, y, z weights
+    # Vertical too: a vertical gust is as large as a horizontal one, and in contact, where
+    # the hover-thrust estimator is frozen, it would move the tool along the wall.
+    axes: list = param([1.0, 1.0, 1.0], lo=0.0, hi=1.0, length=3)   # map x, y, z weights
 
 
 class DisturbanceObserver:
@@ -50,9 +56,12 @@ class DisturbanceObserver:
         """The thrust force (map) just sent to the actuators."""
         self._f_cmd_map = np.asarray(f_thrust_map, dtype=float)
 
-    def update(self, R_map_base, specific_force_base, f_contact_map, dt_s):
+    def update(self, R_map_base, specific_force_base, f_contact_map, dt_s, airborne=True):
         """One tick: the IMU's specific force (body) and the measured contact force (map),
-        both over the tick since the last command. Returns the filtered F_ext (map)."""
+        both over the tick since the last command. Returns the filtered F_ext (map).
+
+        ``airborne`` False: the ground may carry the vehicle, so the vertical estimate
+        fades out (with the filter's time constant) instead of learning its reaction."""
         tau = self.config.tau_s
         if tau <= 0.0 or self._f_cmd_map is None:
             return self.f_ext_map
@@ -62,7 +71,8 @@ class DisturbanceObserver:
         lag = 1.0 if self.thrust_tau_s <= 0.0 else 1.0 - math.exp(-dt_s / self.thrust_tau_s)
         self._f_thrust_map = self._f_thrust_map + lag * (self._f_cmd_map - self._f_thrust_map)
         measured = self.mass_kg * (np.asarray(R_map_base) @ np.asarray(specific_force_base))
-        residual = (measured - self._f_thrust_map - np.asarray(f_contact_map)) * self._axes
+        axes = self._axes if airborne else self._axes * _HORIZONTAL
+        residual = (measured - self._f_thrust_map - np.asarray(f_contact_map)) * axes
         self.f_ext_map = self.f_ext_map + (1.0 - math.exp(-dt_s / tau)) * (
             residual - self.f_ext_map)
         norm = math.sqrt(self.f_ext_map @ self.f_ext_map)

@@ -67,7 +67,8 @@ class FlightCore:
 
         R_map_base = frames.quat_matrix(state.q_map_base)
         if specific_force_base is not None and np.all(np.isfinite(specific_force_base)):
-            self.disturbance.update(R_map_base, specific_force_base, f_contact_map, dt_s)
+            self.disturbance.update(R_map_base, specific_force_base, f_contact_map, dt_s,
+                                    setpoint.airborne)
         f_p_map = self.impedance.update(state.p_map, state.v_map, setpoint, f_contact_map, dt_s,
                                         self.disturbance.f_ext_map)
         R_map_base_d, _, _ = attitude_setpoint(f_p_map, setpoint.yaw_rad, setpoint.pitch_rad,

@@ -38,6 +38,8 @@ __all__ = ['DEFAULT_CONTACT_FORCE_N', 'MODES', 'MinJerk', 'Mission', 'MissionCon
 NEAR_WALL = (Mode.APPROACH, Mode.CONTACT, Mode.HOLD, Mode.SLIDE, Mode.TARGET_LOST)
 # Modes in which the reference is in the target frame t (the working frame is not map).
 IN_TARGET_FRAME = NEAR_WALL + (Mode.RETREAT,)
+# Modes in which the ground may carry the vehicle (ImpedanceSetpoint.airborne is False).
+_NEAR_GROUND = (Mode.IDLE, Mode.TAKEOFF, Mode.LAND, Mode.FAILSAFE_LAND)
 # A task that did not end: the plan stopped before it, or while it ran.
 NOT_RUN = 'not_run'
 # The touch's alignment check low-passes the tool tip's offset with this time constant:
@@ -992,7 +994,8 @@ class Mission:
             lambda_d_t=p, dlambda_d_t=v, ddlambda_d_t=a,
             yaw_rad=self._yaw_ref, pitch_rad=self._pitch,
             contact_gains=self._contact_gains or releasing,
-            tangential_feedforward=self._mode == Mode.SLIDE)
+            tangential_feedforward=self._mode == Mode.SLIDE,
+            airborne=self._mode not in _NEAR_GROUND)
 
 
 class Handlers(typing.NamedTuple):

@@ -24,3 +24,6 @@ class ImpedanceSetpoint:
     # Sliding: cancel the measured contact force along the wall (x_t, y_t), friction, and
     # its moment about base_link; the push along z_t stays the spring of eq. (6).
     tangential_feedforward: bool = False
+    # False while the ground may carry the vehicle (taking off, landing): the disturbance
+    # observer's vertical axis is off, the ground's reaction is no wind.
+    airborne: bool = True
