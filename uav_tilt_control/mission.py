@@ -687,7 +687,7 @@ class Mission:
         """Pause the creep (its clock stands still) while the tool tip is off the target
         in the wall's plane, within the wait allowed."""
         cfg = self.config
-        dt = 0.0 if self._last_tick_s is None else max(self._now_s - self._last_tick_s, 0.0)
+        dt = self._tick_dt_s()
         p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
         off_t = (p_t + self._tool_t())[:2]
         if self._align_off_t is None:
@@ -889,6 +889,10 @@ class Mission:
     def _time_in_mode(self):
         return self._now_s - self._t_mode_s
 
+    def _tick_dt_s(self):
+        """Seconds since the previous tick's setpoint (0 before the first)."""
+        return 0.0 if self._last_tick_s is None else max(self._now_s - self._last_tick_s, 0.0)
+
     def _tool_hides_poi(self):
         p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
         return p_t[2] - self.vehicle.tool_tip_x_m < self.config.tool_occlusion_range_m
@@ -971,7 +975,7 @@ class Mission:
 
     def _setpoint(self):
         cfg = self.config
-        dt = 0.0 if self._last_tick_s is None else max(self._now_s - self._last_tick_s, 0.0)
+        dt = self._tick_dt_s()
         self._last_tick_s = self._now_s
         if self._mode == Mode.SEARCH and self._search.phase == 'sweep':
             self._yaw_goal = self._yaw_ref + cfg.search_yaw_rate_rad_s * dt
