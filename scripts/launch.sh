@@ -214,6 +214,7 @@ if ((!vision_only)); then
         CMD+=(-p "plan_file:=$(realpath "$plan")" "${SITE[@]}")
     fi
     realtime_priority "$RT_PRIORITY"
+    [[ -z $record ]] || CMD+=(-p hold_until_recorded:=true)
     start controller
     # The plant owns time: it starts last, so that its first ticks find the others
     # listening.

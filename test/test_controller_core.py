@@ -74,6 +74,18 @@ def test_autostart_with_the_target_from_vision_waits_for_vision():
     assert core.tick(30 * DT_S, np.zeros(3), DT_S)[1]['mode'] == 'TAKEOFF'
 
 
+def test_a_held_autostart_waits_until_released():
+    # the node holds it (hold_until_recorded) until a recorder listens to the status
+    core = _core(autostart='inspect')
+    core.autostart_held = True
+    for k in range(30):
+        core.on_odometry(_state(k * DT_S))
+        assert core.tick(k * DT_S, np.zeros(3), DT_S)[1]['mode'] == 'IDLE'
+    core.autostart_held = False
+    core.on_odometry(_state(30 * DT_S))
+    assert core.tick(30 * DT_S, np.zeros(3), DT_S)[1]['mode'] == 'TAKEOFF'
+
+
 def test_wrench_is_rotated_to_map_and_the_push_is_positive():
     # facing the wall, yawed: the wall pushes back along -x_FLU = +normal
     core = _core()

@@ -64,6 +64,10 @@ TOPIC_TYPES = {
     VISION_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
 }
 LATCHED_TOPICS = (GROUND_TRUTH_TARGET, CONTROLLER_PLAN)
+# The recorder's node name, and the longest a recorded run (hold_until_recorded) waits for
+# it to listen before it starts anyway (wall clock).
+RECORDER_NODE = 'recorder'
+RECORDER_WAIT_S = 30.0
 
 
 def ground_truth_target(target_id=''):

@@ -86,6 +86,7 @@ class ControllerCore:
         self._truth_id = ''         # the target of the task under way
         self._f_contact_map = np.zeros(3)
         self._autostarted = False
+        self.autostart_held = False     # set by the node until a recorder listens
         # an autostart with the target from vision waits for vision's first frame: the
         # detector loads while the plant already runs, the start's busiest moments
         self._target_source_up = self.config.target_source != 'vision'
@@ -191,7 +192,8 @@ class ControllerCore:
         self.estimator.locked = self.mission.mode in NEAR_WALL
         target = self.estimator.estimate(t_s)
         self.f_normal_n = self._normal_force(target)
-        if self.config.autostart and not self._autostarted and self._target_source_up:
+        if (self.config.autostart and not self._autostarted and self._target_source_up
+                and not self.autostart_held):
             self._autostarted = self.mission.inspect()[0]
         setpoint = self.mission.update(t_s, self._odom, target, self.f_normal_n, odom_age_s)
         if self.mission.mode == Mode.IDLE:

@@ -54,6 +54,9 @@ class ControllerNodeConfig(ControllerConfig):
         300.0, lo=10.0, hi=5000.0,
         doc="the plant's IMU rate: the period of a tick without a usable previous stamp, "
             'and the wall-clock period the jitter is measured against in realtime')
+    hold_until_recorded: bool = param(
+        False, doc='autostart once the recorder subscribes to controller/status, so that '
+        'the recording has the whole mission; at most 30 s of wall time')
 
 
 class ControllerNode(Node):
@@ -99,6 +102,8 @@ class ControllerNode(Node):
         self.periods_s = collections.deque(maxlen=STATS_WINDOW)
         self.compute_s = collections.deque(maxlen=STATS_WINDOW)
         self.loop_stats = (-float('inf'), {})      # (wall time computed, values)
+        self.core.autostart_held = self.cfg.hold_until_recorded
+        self.wall_t0 = time.monotonic()
         # Wall clock: status keeps coming when sim time stalls (the plant is gone).
         self.create_timer(1.0 / self.cfg.status_rate_hz, self.on_status,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -227,9 +232,23 @@ class ControllerNode(Node):
         self.saturated_ticks += int(self.status['saturated'])
 
     # --- status -------------------------------------------------------------------------
+    def _release_autostart(self):
+        """hold_until_recorded: let the autostart go once the recorder subscribes to
+        controller/status (other subscribers, a probe or a viewer, do not count), or the
+        wait is over."""
+        infos = self.get_subscriptions_info_by_topic(self.pub_status.topic_name)
+        if any(info.node_name == names.RECORDER_NODE for info in infos):
+            self.core.autostart_held = False
+        elif time.monotonic() - self.wall_t0 >= names.RECORDER_WAIT_S:
+            self.core.autostart_held = False
+            self.get_logger().warn(f'hold_until_recorded: no recorder on controller/status '
+                                   f'after {names.RECORDER_WAIT_S:.0f} s; starting anyway')
+
     def on_status(self):
         """controller/status: mode, mission, saturation, rejected inputs, loop statistics;
         and controller/plan when a task record changed."""
+        if self.core.autostart_held:
+            self._release_autostart()
         if self.core.mission.plan_version != self.plan_version:
             self.plan_version = self.core.mission.plan_version
             self.pub_plan.publish(String(data=json.dumps(self.core.plan_report())))

@@ -40,8 +40,6 @@ RESEND_PERIOD_S = 0.25
 # Free-running ticks one timer callback may step to catch up with the wall clock; a larger
 # backlog is dropped: a burst of them would come too fast for the controller to answer.
 MAX_CATCH_UP = 10
-# The longest hold_until_recorded keeps the first tick.
-RECORDER_WAIT_S = 30.0
 # Realtime: a warning when the host does not keep up, at most this often.
 REALTIME_WARN_PERIOD_S = 5.0
 # Realtime: achieved real-time factor below this share of the target counts as not keeping up.
@@ -192,10 +190,10 @@ class PlantNode(Node):
             pubs += [self.pub_rgb, self.pub_depth, self.pub_info]
         if all(pub.get_subscription_count() for pub in pubs):
             return True
-        if time.monotonic() - self.wall_t0 < RECORDER_WAIT_S:
+        if time.monotonic() - self.wall_t0 < names.RECORDER_WAIT_S:
             return False
         self.get_logger().warn(f'hold_until_recorded: not every topic has a subscriber after '
-                               f'{RECORDER_WAIT_S:.0f} s; starting anyway')
+                               f'{names.RECORDER_WAIT_S:.0f} s; starting anyway')
         self.holding = False
         return True
 

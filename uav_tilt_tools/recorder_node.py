@@ -63,7 +63,7 @@ class RecorderNode(Node):
     """Discovers topics, subscribes raw, writes an :class:`McapBag`."""
 
     def __init__(self):
-        super().__init__('recorder')
+        super().__init__(names.RECORDER_NODE)
         self.cfg = declare_config(self, RecorderConfig)
         namespace = self.get_namespace()
         self.prefix = namespace.rstrip('/') + '/'
