@@ -22,8 +22,6 @@ import numpy as np
 
 from uav_tilt_common.config import param
 
-_HORIZONTAL = np.array([1.0, 1.0, 0.0])
-
 
 @dataclasses.dataclass
 class DisturbanceConfig:
@@ -44,6 +42,7 @@ class DisturbanceObserver:
         self.mass_kg = float(mass_kg)
         self.thrust_tau_s = float(thrust_tau_s)
         self._axes = np.asarray(self.config.axes, dtype=float)
+        self._axes_on_ground = self._axes * [1.0, 1.0, 0.0]
         self.reset()
 
     def reset(self):
@@ -71,7 +70,7 @@ class DisturbanceObserver:
         lag = 1.0 if self.thrust_tau_s <= 0.0 else 1.0 - math.exp(-dt_s / self.thrust_tau_s)
         self._f_thrust_map = self._f_thrust_map + lag * (self._f_cmd_map - self._f_thrust_map)
         measured = self.mass_kg * (np.asarray(R_map_base) @ np.asarray(specific_force_base))
-        axes = self._axes if airborne else self._axes * _HORIZONTAL
+        axes = self._axes if airborne else self._axes_on_ground
         residual = (measured - self._f_thrust_map - np.asarray(f_contact_map)) * axes
         self.f_ext_map = self.f_ext_map + (1.0 - math.exp(-dt_s / tau)) * (
             residual - self.f_ext_map)

@@ -688,8 +688,7 @@ class Mission:
         in the wall's plane, within the wait allowed."""
         cfg = self.config
         dt = self._tick_dt_s()
-        p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
-        off_t = (p_t + self._tool_t())[:2]
+        off_t = self._tool_tip_t()[:2]
         if self._align_off_t is None:
             self._align_off_t = off_t
         else:
@@ -774,16 +773,16 @@ class Mission:
         self._slide_line_t = points_t[:, :2].copy()
         self._event('sliding')
 
-    def _tool_t(self):
-        """base_link -> tool tip in frame t, from the odometry's attitude."""
+    def _tool_tip_t(self):
+        """The tool tip in frame t, as odometry (position and attitude) sees it."""
         x_tool_map = frames.quat_matrix(self._state.q_map_base)[:, 0]
-        return self._R_map_t.T @ x_tool_map * self.vehicle.tool_tip_x_m
+        p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
+        return p_t + self._R_map_t.T @ x_tool_map * self.vehicle.tool_tip_x_m
 
     def _tick_slide(self, target, f_n, stale):
         self._regulate_push(f_n)
         # the tool tip as odometry sees it, against the line in the wall's plane
-        p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
-        tip_t = (p_t + self._tool_t())[:2]
+        tip_t = self._tool_tip_t()[:2]
         if _distance_to_polyline(tip_t, self._slide_line_t) > self.config.slide_path_tolerance_m:
             self._fail_task('off_line')
         elif self._traj.done(self._now_s):
