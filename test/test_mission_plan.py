@@ -131,6 +131,30 @@ def test_a_plan_runs_two_touches_and_a_slide_in_order():
         assert x_tool @ -NORMAL > np.cos(flight.config.arrive_yaw_tol_rad)
 
 
+@pytest.mark.parametrize('inclination_deg, hint_z_m',
+                         [(-25.0, 0.7), (25.0, 0.7), (-25.0, 2.5), (0.0, 0.4)])
+def test_the_camera_looks_at_the_hint_when_the_search_starts(inclination_deg, hint_z_m):
+    # A wall leaning over the start (negative inclination) puts the look point along its
+    # normal under a low hint's height, so the ground limit raises it: the camera must then
+    # look down at the hint, not up along the normal and over it.
+    tilt = np.radians(inclination_deg)
+    normal = np.array([-np.cos(tilt), 0.0, np.sin(tilt)])
+    hint = np.array([WALL_X_M, 0.3, hint_z_m])
+    flight = PlanFlight([Touch('a', hint, normal, 5.0, 1.0)], unseen={'a'})
+    assert flight.mission.inspect()[0]
+    flight.run_until(lambda f: f.mission.mode == Mode.SEARCH)
+    _, _, _, _, p_map, _, q = flight.log[-1]
+    config = flight.config
+    assert p_map[2] >= config.ground_z_m + 2.0 * config.land_detect_height_m - 1e-9
+    cam = VEHICLE.camera_in_base()
+    R_map_base = Rotation.from_quat(q).as_matrix()
+    ray_cam = (R_map_base @ cam.R).T @ (hint - (p_map + R_map_base @ cam.p))
+    # the hint is within a few degrees of the optical axis (the half field of view of the
+    # 320x240 camera is 30 x 23 degrees; a target +-0.3 m off the hint must stay in it)
+    off_axis_deg = np.degrees(np.arctan2(np.hypot(ray_cam[0], ray_cam[1]), ray_cam[2]))
+    assert off_axis_deg < 5.0
+
+
 def test_the_slide_follows_its_line_with_the_push_and_the_friction_feedforward():
     flight = PlanFlight(_plan()).fly()
     slide = flight.mission.plan[2]

@@ -472,9 +472,12 @@ class Mission:
                 self._enter(Mode.HOVER, f'task {index}: to its target')
             self._hover_phase = 'transit'
             self._plan(look, cfg.hover_speed_m_s)
-            self._yaw_goal = frames.yaw_facing(task.normal_map, default_rad=self._yaw_ref)
-            # the camera looks along the normal at the hint (down at a wall leaning away)
-            pitch = frames.pitch_facing(task.normal_map) if cfg.pitch_to_normal else 0.0
+            # The camera looks at the hint: along the normal (down at a wall leaning away),
+            # or, where the ground raised the look point (a low target on a wall leaning
+            # over), down from there rather than up along the normal and over the target.
+            view = look - task.hint_map
+            self._yaw_goal = frames.yaw_facing(view, default_rad=self._yaw_ref)
+            pitch = frames.pitch_facing(view) if cfg.pitch_to_normal else 0.0
             self._pitch = min(max(pitch, -cfg.max_pitch_rad), cfg.max_pitch_rad)
         else:
             self._enter(Mode.SEARCH)
