@@ -45,6 +45,46 @@ def test_random_draws_cover_the_stated_ranges():
     assert cp.random_draw(7) == cp.random_draw(7)
 
 
+def test_corner_draws_put_every_range_at_one_of_its_ends():
+    draws = [cp.random_draw(seed, corners=True) for seed in range(80)]
+
+    def at_ends(values, ends):
+        values = np.asarray(values, dtype=float)
+        low, high = (np.isclose(values, end, rtol=1e-9, atol=1e-9) for end in ends)
+        # every value at an end, both ends drawn
+        assert np.all(low | high) and low.any() and high.any(), (ends, values)
+
+    scenarios = [s for s, _ in draws]
+    bearing = [np.degrees(np.arctan2(s.wall.position_m[1], s.wall.position_m[0]))
+               for s in scenarios]
+    at_ends([np.hypot(*s.wall.position_m) for s in scenarios], cp.WALL_DISTANCE_M)
+    at_ends([cp._wrap_deg(s.wall.yaw_deg - b) for s, b in zip(scenarios, bearing)],
+            (-cp.WALL_YAW_DEG, cp.WALL_YAW_DEG))
+    # the start heading off the wall's direction: +-180 degrees are one heading, away
+    assert all(abs(abs(cp._wrap_deg(s.start_yaw_deg - b)) - 180.0) < 1e-6
+               for s, b in zip(scenarios, bearing))
+    at_ends([s.wall.inclination_deg for s in scenarios],
+            (-cp.WALL_INCLINATION_DEG, cp.WALL_INCLINATION_DEG))
+    at_ends([s.wall.stiffness_n_per_m for s in scenarios], cp.STIFFNESS_N_PER_M)
+    at_ends([s.wall.friction for s in scenarios], cp.FRICTION)
+    at_ends([np.linalg.norm(s.wind.mean_m_s) for s in scenarios], (0.0, cp.MEAN_WIND_M_S))
+    at_ends([3.0 * s.wind.gust_std_m_s for s in scenarios], (0.0, cp.GUST_PEAK_M_S))
+    at_ends([s.mismatch.mass_scale for s in scenarios],
+            (1.0 - cp.MASS_MISMATCH, 1.0 + cp.MASS_MISMATCH))
+    targets = [next(o for o in s.objects if o.target) for s in scenarios]
+    at_ends([t.u_m for t in targets], (-cp.TARGET_U_M, cp.TARGET_U_M))
+    at_ends([t.v_m for t in targets], cp.TARGET_HEIGHT_M)
+    hinted = [(hint, t) for (_, hint), t in zip(draws, targets) if hint is not None]
+    assert hinted
+    for hint, t in hinted:
+        np.testing.assert_allclose(np.abs([hint[0] - t.u_m, hint[1] - t.v_m]),
+                                   cp.HINT_ERROR_M)
+    assert all(abs(o.u_m) < s.wall.width_m / 2 and 0.0 < o.v_m < s.wall.height_m
+               for s in scenarios for o in s.objects)
+    # the uniform draw is another world
+    assert cp.random_draw(7, corners=True) != cp.random_draw(7)
+
+
 def test_wilson_interval():
     low, high = cp.wilson_interval(19, 20)
     # the textbook value for 19 of 20 at 95%: [0.764, 0.991]

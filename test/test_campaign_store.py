@@ -74,6 +74,23 @@ def test_resume_refuses_another_campaign(tmp_path):
         cp.campaign(1, SEED + 1, duration_s=0.1, progress=False, out=tmp_path, resume=True)
 
 
+def test_corners_reach_every_run_and_a_resume_keeps_them(tmp_path):
+    done = subprocess.run(_cli('--corners', '--n', '2', '--duration', '0.1', '--out',
+                               str(tmp_path)), capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result['corners'] is True
+    for run in result['runs']:
+        for key, ends in (('wall_stiffness_n_per_m', cp.STIFFNESS_N_PER_M),
+                          ('wall_distance_m', cp.WALL_DISTANCE_M)):
+            assert min(abs(run[key] / end - 1.0) for end in ends) < 1e-9, (key, run[key])
+    # the folder holds a corner campaign: resuming it as a uniform one is refused
+    with pytest.raises(ConfigError):
+        cp.campaign(2, SEED, duration_s=0.1, progress=False, out=tmp_path, resume=True)
+    cp.campaign(2, SEED, duration_s=0.1, progress=False, out=tmp_path, resume=True,
+                corners=True)
+
+
 def test_record_keeps_one_mcap_per_run_that_the_report_reads(tmp_path):
     result = cp.campaign(2, SEED, workers=2, duration_s=4.0, progress=False, out=tmp_path,
                          record=True)

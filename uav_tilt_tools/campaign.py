@@ -50,54 +50,64 @@ HINT_ERROR_M = 0.3
 DURATION_S = 150.0
 
 
-def random_draw(seed):
+def random_draw(seed, corners=False):
     """(scenario, hint) of one randomised world: the hint (u, v on the wall, within
-    HINT_ERROR_M of the target) when the wall carries a look-alike of the target, else None."""
+    HINT_ERROR_M of the target) when the wall carries a look-alike of the target, else None.
+
+    ``corners``: each range (distance, yaw and inclination of the wall, the target's place,
+    stiffness, friction, wind, noise, mismatch, start yaw, the hint's error) is drawn at one
+    of its two ends, where failures gather; directions (where the wall and the wind are)
+    and the other objects stay uniform."""
     rng = np.random.default_rng(seed)
-    distance = rng.uniform(*WALL_DISTANCE_M)
+    draw = _range_ends(rng) if corners else rng.uniform
+    distance = draw(*WALL_DISTANCE_M)
     bearing = rng.uniform(-np.pi, np.pi)           # where the wall is, seen from the start
-    wall_yaw = np.degrees(bearing) + rng.uniform(-WALL_YAW_DEG, WALL_YAW_DEG)
-    target_u, target_v = rng.uniform(-TARGET_U_M, TARGET_U_M), rng.uniform(*TARGET_HEIGHT_M)
+    wall_yaw = np.degrees(bearing) + draw(-WALL_YAW_DEG, WALL_YAW_DEG)
+    target_u, target_v = draw(-TARGET_U_M, TARGET_U_M), draw(*TARGET_HEIGHT_M)
     objects = [dict(cls='bolt_plate', u_m=target_u, v_m=target_v, target=True)]
     taken = [(target_u, target_v)]
     hint = None
     if rng.random() < LOOKALIKE_PROB:
         u, v = _free_spot(rng, taken, 0.8, 1.5)
         objects.append(dict(cls='bolt_plate', u_m=u, v_m=v))
-        hint = [target_u + rng.uniform(-HINT_ERROR_M, HINT_ERROR_M),
-                target_v + rng.uniform(-HINT_ERROR_M, HINT_ERROR_M)]
+        hint = [target_u + draw(-HINT_ERROR_M, HINT_ERROR_M),
+                target_v + draw(-HINT_ERROR_M, HINT_ERROR_M)]
     others = [c for c in OBJECT_CLASSES if c != 'bolt_plate']
     for _ in range(int(rng.integers(1, 3))):
         u, v = _free_spot(rng, taken, 0.45, 1.0)
         objects.append(dict(cls=str(rng.choice(others)), u_m=u, v_m=v))
-    gust_std = rng.uniform(0.0, GUST_PEAK_M_S / 3.0)
+    gust_std = draw(0.0, GUST_PEAK_M_S / 3.0)
     heading = rng.uniform(0.0, 2 * np.pi)
-    mean = rng.uniform(0.0, MEAN_WIND_M_S)
+    mean = draw(0.0, MEAN_WIND_M_S)
     data = dict(
         seed=int(seed),
         start_yaw_deg=float(_wrap_deg(np.degrees(bearing)
-                                      + rng.uniform(-START_YAW_DEG, START_YAW_DEG))),
+                                      + draw(-START_YAW_DEG, START_YAW_DEG))),
         wall=dict(position_m=[float(distance * np.cos(bearing)),
                               float(distance * np.sin(bearing))],
                   yaw_deg=float(_wrap_deg(wall_yaw)),
-                  inclination_deg=float(rng.uniform(-WALL_INCLINATION_DEG,
-                                                    WALL_INCLINATION_DEG)),
+                  inclination_deg=float(draw(-WALL_INCLINATION_DEG, WALL_INCLINATION_DEG)),
                   width_m=6.0,
-                  stiffness_n_per_m=float(np.exp(rng.uniform(*np.log(STIFFNESS_N_PER_M)))),
-                  friction=float(rng.uniform(*FRICTION))),
+                  stiffness_n_per_m=float(np.exp(draw(*np.log(STIFFNESS_N_PER_M)))),
+                  friction=float(draw(*FRICTION))),
         objects=objects,
         wind=dict(mean_m_s=[float(mean * np.cos(heading)), float(mean * np.sin(heading)), 0.0],
-                  gust_std_m_s=float(gust_std), gust_tau_s=float(rng.uniform(0.5, 2.0))),
-        noise=dict(imu_gyro_rad_s=float(rng.uniform(0, 0.005)),
-                   imu_accel_m_s2=float(rng.uniform(0, 0.1)),
-                   odom_pos_m=float(rng.uniform(0, 0.002)),
-                   odom_att_rad=float(rng.uniform(0, 0.003)),
-                   ft_force_n=float(rng.uniform(0, 0.1)),
-                   depth_m=float(rng.uniform(0, 0.003))),
-        mismatch=dict(mass_scale=float(rng.uniform(1 - MASS_MISMATCH, 1 + MASS_MISMATCH)),
-                      inertia_scale=float(rng.uniform(0.85, 1.15))),
+                  gust_std_m_s=float(gust_std), gust_tau_s=float(draw(0.5, 2.0))),
+        noise=dict(imu_gyro_rad_s=float(draw(0, 0.005)),
+                   imu_accel_m_s2=float(draw(0, 0.1)),
+                   odom_pos_m=float(draw(0, 0.002)),
+                   odom_att_rad=float(draw(0, 0.003)),
+                   ft_force_n=float(draw(0, 0.1)),
+                   depth_m=float(draw(0, 0.003))),
+        mismatch=dict(mass_scale=float(draw(1 - MASS_MISMATCH, 1 + MASS_MISMATCH)),
+                      inertia_scale=float(draw(0.85, 1.15))),
     )
     return check_scenario(from_dict(Scenario, data)), hint
+
+
+def _range_ends(rng):
+    """A stand-in for ``rng.uniform(lo, hi)`` that gives lo or hi, each half the time."""
+    return lambda lo, hi: float(hi if rng.random() < 0.5 else lo)
 
 
 def _free_spot(rng, taken, min_gap_m, spread_m):
@@ -130,7 +140,7 @@ def run_one(job):
     dict, the bytes of its MCAP recording when ``job['record']``, else None)."""
     # Imported here so that each worker process builds its own physics server.
     from uav_tilt_tools.fly import fly, site_overrides
-    scenario, hint = random_draw(job['seed'])
+    scenario, hint = random_draw(job['seed'], job['corners'])
     overrides = site_overrides(scenario, hint) if hint is not None else {}
     with tempfile.TemporaryDirectory(prefix='uav_tilt_run_') as tmp:
         record = os.path.join(tmp, 'recording.mcap') if job['record'] else None
@@ -167,20 +177,20 @@ def wilson_interval(successes, n, z=1.96):
 
 
 def jobs_of(n, seed, target_source='ground_truth', duration_s=None, threads=0,
-            record=False, plan_file=None, scenario_file=None):
+            record=False, plan_file=None, scenario_file=None, corners=False):
     """The ``n`` runs of campaign ``seed``: one world seed each, by run index."""
     seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=n)
     return [dict(index=i, seed=int(s), target_source=target_source, duration_s=duration_s,
                  threads=threads, record=record, plan_file=plan_file,
-                 scenario_file=scenario_file) for i, s in enumerate(seeds)]
+                 scenario_file=scenario_file, corners=corners) for i, s in enumerate(seeds)]
 
 
 def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=None,
              progress=True, backend='local', address=None, out=None, resume=False,
-             record=False, plan_file=None, scenario_file=None):
+             record=False, plan_file=None, scenario_file=None, corners=False):
     """Run ``n`` randomised missions (of the plan ``plan_file`` on ``scenario_file``'s
-    wall when given; ``duration_s`` None: DURATION_S per task); returns the DESIGN section
-    7 JSON dict.
+    wall when given; ``duration_s`` None: DURATION_S per task; ``corners``: worlds at the
+    ends of every range, :func:`random_draw`); returns the DESIGN section 7 JSON dict.
 
     ``backend``: 'local' (a process pool of ``workers``, default one per core) or 'ray'
     (one Ray task per run on a local Ray of ``workers`` CPUs, or on the cluster at
@@ -204,13 +214,15 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=Non
         workers = workers or min(n, cpus)
         threads = max(1, cpus // max(workers, 1))
     jobs = jobs_of(n, seed, target_source, duration_s, threads, record, plan_file,
-                   scenario_file)
+                   scenario_file, corners)
     store = None
     if out is not None:
         from uav_tilt_tools.campaign_store import RunStore
-        store = RunStore(out, dict(n=n, seed=seed, target_source=target_source,
-                                   duration_s=duration_s, plan_file=plan_file,
-                                   scenario_file=scenario_file), resume)
+        args = dict(n=n, seed=seed, target_source=target_source, duration_s=duration_s,
+                    plan_file=plan_file, scenario_file=scenario_file)
+        if corners:     # only then, so that folders of earlier campaigns still resume
+            args['corners'] = True
+        store = RunStore(out, args, resume)
     done = store.runs_of(jobs) if store is not None else {}
     todo = [job for job in jobs if job['index'] not in done]
     bar = None
@@ -234,7 +246,7 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=Non
         results.close()
         if bar is not None:
             bar.close()
-    result = summarize(n, seed, target_source, [done[i] for i in sorted(done)])
+    result = summarize(n, seed, target_source, [done[i] for i in sorted(done)], corners)
     if store is not None:
         store.finish(result)
     return result
@@ -252,13 +264,14 @@ class Interrupted(KeyboardInterrupt):
         return f'interrupted: {self.kept} of {self.n} runs finished{where}'
 
 
-def summarize(n, seed, target_source, runs):
+def summarize(n, seed, target_source, runs, corners=False):
     """The campaign JSON of its ``runs`` (by index)."""
     successes = sum(r['success'] for r in runs)
     low, high = wilson_interval(successes, n)
     failures = collections.Counter(f"{r['failure']['reason']} in {r['failure']['mode']}"
                                    for r in runs if not r['success'])
-    return dict(n=n, seed=seed, target_source=target_source, successes=successes,
+    return dict(n=n, seed=seed, target_source=target_source, corners=corners,
+                successes=successes,
                 success_rate=successes / n if n else 0.0, success_rate_ci95=[low, high],
                 failures=dict(failures), runs=runs)
 
@@ -304,6 +317,8 @@ def register(sub):
     parser.add_argument('--target-source', choices=('ground_truth', 'vision'),
                         default='ground_truth',
                         help='vision: render the camera and run the deployed detector')
+    parser.add_argument('--corners', action='store_true',
+                        help='draw every range of the world at one of its ends')
     parser.set_defaults(func=_run)
 
 
@@ -322,7 +337,7 @@ def _run(args):
         result = campaign(args.n, args.seed, args.workers, args.target_source, args.duration,
                           backend=args.backend, address=args.address, out=args.out,
                           resume=args.resume, record=args.record, plan_file=args.plan,
-                          scenario_file=args.scenario)
+                          scenario_file=args.scenario, corners=args.corners)
     except ConfigError as err:
         print(f'uav-tilt campaign: {err}', file=sys.stderr)
         return 2
