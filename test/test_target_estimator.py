@@ -8,6 +8,7 @@ from uav_tilt_common.pose import Pose
 from uav_tilt_common.state import VehicleState
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import frames
+from uav_tilt_control.site import HINT_ERROR_M
 from uav_tilt_control.target_estimator import TargetEstimator, TargetEstimatorConfig
 
 RATE_HZ = 300.0
@@ -130,6 +131,25 @@ def test_a_hint_aims_the_estimate_and_bounds_its_reacquisition():
         est.add_measurement(t, *_measurement_at(t), None)
     assert est.counters['reacquired'] == 0 and est.counters['switch_refused'] == 2
     assert np.linalg.norm(est.estimate().p_poi_map - other) < 1e-6
+
+
+@pytest.mark.parametrize('sign', [1.0, -1.0])
+def test_a_hint_takes_its_target_at_the_stated_error_and_not_a_look_alike(sign):
+    """A hint is good to HINT_ERROR_M along each wall axis: the target at its diagonal
+    corner, measured 2 cm further off, is the first fix; a look-alike 0.8 m from the target
+    along one axis (the campaign's closest), the hint off towards it, is refused."""
+    est = _estimator()
+    _fill(est, 1.0)
+    u, v = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])    # the wall's axes in map
+    est.aim(P_POI_MAP + sign * HINT_ERROR_M * (u + v))
+    seen = P_POI_MAP - sign * 0.02 * (u + v) / np.sqrt(2.0)     # 2 cm further off
+    assert est.add_measurement(0.1, *_measurement_at(0.1, p_map=seen), None)
+    est = _estimator()
+    _fill(est, 1.0)
+    est.aim(P_POI_MAP + sign * HINT_ERROR_M * (u + v))
+    look_alike = P_POI_MAP + sign * 0.8 * u
+    assert not est.add_measurement(0.1, *_measurement_at(0.1, p_map=look_alike), None)
+    assert est.counters['rejected_hint'] == 1 and est.estimate() is None
 
 
 def test_nonfinite_rejected():

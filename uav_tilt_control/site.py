@@ -7,6 +7,10 @@ import numpy as np
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.geometry import wall_point, wall_rotation
 
+# A target hint is good to this along each of the wall's axes (DESIGN section 5), so up to
+# sqrt(2) times it away on the diagonal.
+HINT_ERROR_M = 0.3
+
 
 @dataclasses.dataclass
 class SiteConfig:
@@ -14,7 +18,7 @@ class SiteConfig:
     ``wall_yaw_deg`` the heading towards it, ``wall_inclination_deg`` its top leaning away,
     ``wall_width_m`` across u = 0, ``wall_height_m`` from the ground; 0 = not surveyed),
     the ids of the targets a plan may name and, optionally, roughly where the target of a
-    one-touch inspection is on the wall (u, v metres; within about 0.3 m)."""
+    one-touch inspection is on the wall (u, v metres; within HINT_ERROR_M along each)."""
 
     wall_position_m: list = param([], lo=-1000.0, hi=1000.0, items=float)
     wall_yaw_deg: float = param(0.0, lo=-180.0, hi=180.0)

@@ -18,6 +18,11 @@ from uav_tilt_common.geometry import quat_slerp, quat_to_matrix
 from uav_tilt_common.pose import Pose
 from uav_tilt_common.targets import is_no_target
 from uav_tilt_control import frames
+from uav_tilt_control.site import HINT_ERROR_M
+
+# The first fix near a hint is taken within the hint's error on the diagonal plus this: the
+# vision estimate's own error (a few cm) and the POI's offset within the hinted object.
+HINT_MARGIN_M = 0.03
 
 
 @dataclasses.dataclass
@@ -34,7 +39,10 @@ class TargetEstimatorConfig:
     gate_angle_rad: float = param(0.5, lo=0.01, hi=3.2)
     reacquire_n: int = param(10, lo=1, hi=1000)             # consistent rejections to reset
     valid_age_s: float = param(0.5, lo=0.01, hi=10.0)       # estimate older than this: invalid
-    hint_radius_m: float = param(0.4, lo=0.01, hi=5.0)      # first fix this near a hint
+    # first fix this near a hint: 0.45 m, so that a look-alike is told apart when it is
+    # over 0.75 m (0.45 + HINT_ERROR_M) from the target along either of the wall's axes
+    hint_radius_m: float = param(round(math.sqrt(2.0) * HINT_ERROR_M + HINT_MARGIN_M, 2),
+                                 lo=0.01, hi=5.0)
 
 
 class TargetEstimate(typing.NamedTuple):
