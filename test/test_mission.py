@@ -385,11 +385,13 @@ def test_inconsistent_timeouts_rejected():
         Mission(VEHICLE, MissionConfig(target_lost_hold_s=2.0, target_lost_retreat_s=1.0))
 
 
-def _touching_with_offset(cfg, offset_map):
-    """A flight in CONTACT's creep whose tracker leaves the body ``offset_map`` off its
-    reference from now on (a gust), settled for the alignment filter."""
+def _touching_with_offset(cfg, offset_map, clearance_m=np.inf):
+    """A flight in CONTACT's creep, once the tool tip's reference is ``clearance_m`` or less
+    from the wall, whose tracker leaves the body ``offset_map`` off its reference from then
+    on (a gust)."""
     flight = _in_mode(Mode.CONTACT, cfg)
-    flight.run_until(lambda f: f.mission.phase == 'touch', 30.0)
+    flight.run_until(lambda f: f.mission.phase == 'touch'
+                     and _creep_depth(f) - VEHICLE.tool_tip_x_m <= clearance_m, 30.0)
     track = flight._track
 
     def off_track(sp):
@@ -420,6 +422,25 @@ def test_the_touch_waits_for_the_tool_over_the_target(offset_m, pauses):
     else:
         assert flight.mission.phase == 'touch'
         assert crept_m == pytest.approx(cfg.touch_speed_m_s * 1.0, rel=0.02)
+    # the gust over, the creep goes on to the wall and the push
+    flight._track = Flight._track.__get__(flight)
+    flight.run_to(Mode.HOLD, timeout_s=30.0)
+
+
+def test_a_gust_near_the_wall_backs_the_tool_out_while_the_touch_waits():
+    cfg = MissionConfig()
+    # 2 mm from the wall, a gust puts the tool 1 cm off the target in the wall's plane
+    flight = _touching_with_offset(cfg, np.array([0.0, 0.0, 0.01]), clearance_m=0.002)
+    start = len(flight.log)
+    flight.run_for(1.5)
+    assert flight.mission.phase == 'align'
+    # the creep ran back out, at its own speed, to the clearance, and waits there untouched
+    clearance = [entry[2].lambda_d_t[2] - VEHICLE.tool_tip_x_m for entry in flight.log[start:]]
+    assert np.max(np.diff(clearance)) <= cfg.touch_speed_m_s * DT_S + 1e-12
+    assert clearance[-1] == pytest.approx(cfg.touch_align_clearance_m,
+                                          abs=cfg.touch_speed_m_s * DT_S)
+    gaps = [(entry[3] - P_POI) @ NORMAL - VEHICLE.tool_tip_x_m for entry in flight.log[start:]]
+    assert min(gaps) > 0.0
     # the gust over, the creep goes on to the wall and the push
     flight._track = Flight._track.__get__(flight)
     flight.run_to(Mode.HOLD, timeout_s=30.0)

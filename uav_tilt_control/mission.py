@@ -87,9 +87,12 @@ class MissionConfig:
     # Friction holds the tool where it first touches (mu F_c is far above what the contact
     # stiffness along the wall pulls with): the creep pauses while the tool tip (odometry)
     # is more than touch_align_m off the target in the wall's plane (a gust), for at most
-    # touch_align_wait_s in all. 0 turns the pause off.
+    # touch_align_wait_s in all, and backs the tool tip out to touch_align_clearance_m from
+    # the surface meanwhile (a gust towards the wall would make the touch there, off the
+    # target). 0 turns the pause off.
     touch_align_m: float = param(0.004, lo=0.0, hi=0.1)
     touch_align_wait_s: float = param(5.0, lo=0.0, hi=60.0)
+    touch_align_clearance_m: float = param(0.01, lo=0.0, hi=0.5)
     press_time_s: float = param(2.0, lo=0.1, hi=30.0)
     # HOLD: the measured push corrects the depth with this time constant, so that a soft
     # wall (which gives way) still gets the setpoint; 0 disables the correction.
@@ -703,6 +706,10 @@ class Mission:
         if self._aligning:
             self._align_waited_s += dt
             self._traj.t0_s += dt
+            # the creep runs backwards, at its own speed, until the tip is clear of the wall
+            clearance_m = self._ref_t()[0][2] - self.vehicle.tool_tip_x_m
+            if clearance_m < cfg.touch_align_clearance_m:
+                self._traj.t0_s += dt
 
     def _start_press(self):
         """Ramp the depth that pushes with the setpoint, from one that holds the tool on the
