@@ -56,7 +56,8 @@ class ControllerNodeConfig(ControllerConfig):
             'and the wall-clock period the jitter is measured against in realtime')
     hold_until_recorded: bool = param(
         False, doc='autostart once the recorder subscribes to controller/status, so that '
-        'the recording has the whole mission; at most 30 s of wall time')
+        f'the recording has the whole mission; at most {names.RECORDER_WAIT_S:.0f} s of '
+        'wall time')
 
 
 class ControllerNode(Node):
