@@ -43,9 +43,11 @@ DRAWS = {'heldout': ('heldout', 300, (0.4, 4.0)),
 SEEDS = dict(zip(DRAWS, (int(s) for s in np.random.default_rng().integers(
     10**6, 2**31 - 1, size=len(DRAWS)))))
 RESAMPLES = 200
-# The spec's goals. mAP@0.5 >= 0.95 on held-out scenes; at every mission range the target
-# class AP@0.5 >= 0.95 and objects under 32 px a side AP@0.5 >= 0.93; the deployed int8
-# model within one point of fp32. Objects in view but too little visible to label are
+# The spec's goals. Our fp32 model mAP@0.5 >= 0.95 on held-out scenes and the deployed int8
+# model within one point of it (the detector issue's split: the goal is the model's, the
+# budget compression's; int8 itself averages 0.939, docs/detector.md); at every mission
+# range the target class AP@0.5 >= 0.95 and objects under 32 px a side AP@0.5 >= 0.93,
+# int8 within one point of fp32 there too. Objects in view but too little visible to label are
 # ignore regions (COCO's crowd regions), as in the rendered sets.
 MAP50_GOAL = 0.95
 TARGET_AP50_GOAL = 0.95
@@ -118,11 +120,10 @@ def test_the_drawn_sets_are_scored_with_their_ignore_regions(draw):
 
 
 def test_map50_goal_on_held_out_scenes(heldout):
-    for model in ('fp32', 'int8'):
-        lo, hi = interval(heldout[model], 'map50')
-        point = heldout[model]['summary']['map50']
-        assert hi >= MAP50_GOAL, (heldout['seed'], model, point, (lo, hi))
-        assert lo <= point <= hi
+    lo, hi = interval(heldout['fp32'], 'map50')
+    point = heldout['fp32']['summary']['map50']
+    assert hi >= MAP50_GOAL, (heldout['seed'], point, (lo, hi))
+    assert lo <= point <= hi
 
 
 def test_deployed_int8_within_one_point_of_fp32_on_held_out_scenes(heldout):
