@@ -67,6 +67,7 @@ def test_corner_draws_put_every_range_at_one_of_its_ends():
     at_ends([s.wall.inclination_deg for s in scenarios],
             (-cp.WALL_INCLINATION_DEG, cp.WALL_INCLINATION_DEG))
     at_ends([s.wall.stiffness_n_per_m for s in scenarios], cp.STIFFNESS_N_PER_M)
+    assert {s.wall.stiffness_n_per_m for s in scenarios} == set(cp.STIFFNESS_N_PER_M)
     at_ends([s.wall.friction for s in scenarios], cp.FRICTION)
     at_ends([np.linalg.norm(s.wind.mean_m_s) for s in scenarios], (0.0, cp.MEAN_WIND_M_S))
     at_ends([3.0 * s.wind.gust_std_m_s for s in scenarios], (0.0, cp.GUST_PEAK_M_S))

@@ -88,7 +88,7 @@ def random_draw(seed, corners=False):
                   yaw_deg=float(_wrap_deg(wall_yaw)),
                   inclination_deg=float(draw(-WALL_INCLINATION_DEG, WALL_INCLINATION_DEG)),
                   width_m=6.0,
-                  stiffness_n_per_m=float(np.exp(draw(*np.log(STIFFNESS_N_PER_M)))),
+                  stiffness_n_per_m=_log_uniform(draw, *STIFFNESS_N_PER_M),
                   friction=float(draw(*FRICTION))),
         objects=objects,
         wind=dict(mean_m_s=[float(mean * np.cos(heading)), float(mean * np.sin(heading)), 0.0],
@@ -108,6 +108,12 @@ def random_draw(seed, corners=False):
 def _range_ends(rng):
     """A stand-in for ``rng.uniform(lo, hi)`` that gives lo or hi, each half the time."""
     return lambda lo, hi: float(hi if rng.random() < 0.5 else lo)
+
+
+def _log_uniform(draw, lo, hi):
+    """Log-uniform in [lo, hi] with ``draw`` = ``rng.uniform``; exactly an end with
+    ``_range_ends`` (exp(log(500)) is not 500)."""
+    return float(lo * (hi / lo) ** draw(0.0, 1.0))
 
 
 def _free_spot(rng, taken, min_gap_m, spread_m):
