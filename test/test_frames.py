@@ -87,6 +87,12 @@ def test_pitch_facing_aligns_tool_with_inclined_normal():
     np.testing.assert_allclose(R_map_base[:, 0], -n, atol=TOL)
 
 
+@pytest.mark.parametrize('yaw, pitch', [(0.0, 0.0), (2.5, 0.4), (-1.2, -0.7), (3.1, 1.2)])
+def test_tool_direction_is_body_x_at_that_heading_and_pitch(yaw, pitch):
+    R_map_base = Rotation.from_euler('ZY', [yaw, pitch]).as_matrix()
+    np.testing.assert_allclose(frames.tool_direction(yaw, pitch), R_map_base[:, 0], atol=TOL)
+
+
 def test_to_frame_undoes_a_pose():
     R_a_b = Rotation.from_euler('zyx', [0.3, -0.2, 0.1]).as_matrix()
     p_a_b, x_b = np.array([1.0, 2.0, 3.0]), np.array([-0.5, 0.2, 0.1])

@@ -465,3 +465,23 @@ def test_the_touch_alignment_can_be_turned_off():
     flight = _touching_with_offset(MissionConfig(touch_align_m=0.0), np.array([0.0, 0.0, 0.02]))
     flight.run_until(lambda f: f.mission.phase == 'press', 30.0)
     assert 'align' not in flight.phases
+
+
+def test_the_tool_tip_meets_a_target_beyond_the_pitch_limit():
+    # a wall leaning back further than the body may pitch: the tool stays 0.2 rad off the
+    # normal, so the body stands off the normal (9 cm here) for the tool tip to meet the POI
+    cfg = MissionConfig(max_pitch_rad=0.3)
+    normal = np.array([-np.cos(0.5), 0.0, np.sin(0.5)])
+    flight = Flight(cfg, TargetEstimate(P_POI, normal, 0.02, True))
+    assert flight.mission.inspect()[0]
+    flight.run_to(Mode.HOLD, timeout_s=120.0)
+    _, _, sp, p = flight.log[-1]
+    assert sp.pitch_rad == pytest.approx(cfg.max_pitch_rad)
+    tip = p + VEHICLE.tool_tip_x_m * Rotation.from_euler(
+        'ZY', [sp.yaw_rad, sp.pitch_rad]).apply([1.0, 0.0, 0.0])
+    off = tip - P_POI
+    assert np.linalg.norm(off - (off @ normal) * normal) < 1e-3
+    # over the target all along: the touch never waited for the tip
+    assert 'align' not in flight.phases
+    flight.run_until(lambda f: f.mission.mode == Mode.IDLE, 60.0)
+    assert flight.mission.status['success']

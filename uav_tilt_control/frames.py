@@ -54,6 +54,12 @@ def pitch_facing(normal_map):
     return math.asin(min(max(float(unit(normal_map)[2]), -1.0), 1.0))
 
 
+def tool_direction(yaw_rad, pitch_rad):
+    """x_FLU in map (the tool's axis) at this heading and pitch (positive nose down)."""
+    c = math.cos(pitch_rad)
+    return np.array([c * math.cos(yaw_rad), c * math.sin(yaw_rad), -math.sin(pitch_rad)])
+
+
 def quat_matrix(q):
     """Rotation matrix of a quaternion (x, y, z, w) of any norm, which scipy's from_quat
     accepts too; a non-finite or zero one gives NaNs instead of raising."""

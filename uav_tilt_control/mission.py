@@ -159,7 +159,10 @@ class TargetFrame(typing.NamedTuple):
     key: tuple
     R_map_t: np.ndarray
     origin_map: np.ndarray
-    pitch_rad: float        # the body pitch that points the tool along -z_t
+    pitch_rad: float        # the body pitch that points the tool along -z_t, within limits
+    # What the body's reference shifts in the wall's plane (frame t) so that the tool tip
+    # still meets the target when the pitch limit keeps the tool off the normal (x_t, y_t, 0)
+    tool_shift_t: np.ndarray
 
 
 class SearchState:
@@ -241,6 +244,7 @@ class Mission:
         self._yaw_ref = 0.0
         self._yaw_goal = 0.0
         self._pitch = 0.0
+        self._tool_shift_t = np.zeros(3)   # TargetFrame.tool_shift_t while frame t is worked in
         self._contact_gains = False
         self._inspect_pending = False
         self._after_retreat = Mode.LAND     # None: the plan's next task
@@ -923,11 +927,16 @@ class Mission:
         if self._target_frame is None or key != self._target_frame.key:
             pitch = frames.pitch_facing(n_map) if cfg.pitch_to_normal else 0.0
             pitch = min(max(pitch, -cfg.max_pitch_rad), cfg.max_pitch_rad)
-            self._target_frame = TargetFrame(
-                key, *frames.target_frame_from_normal(p_poi, n_map), pitch)
+            R_map_t, origin_map = frames.target_frame_from_normal(p_poi, n_map)
+            # the tip is L x_FLU ahead of the body: where x_FLU is not -z_t, the body
+            # stands off the normal by L times x_FLU's part in the wall's plane
+            x_tool_t = R_map_t.T @ frames.tool_direction(
+                frames.yaw_facing(n_map, default_rad=self._yaw_ref), pitch)
+            shift_t = -self.vehicle.tool_tip_x_m * np.array([x_tool_t[0], x_tool_t[1], 0.0])
+            self._target_frame = TargetFrame(key, R_map_t, origin_map, pitch, shift_t)
         frame = self._target_frame
         self._R_map_t, self._origin_map = frame.R_map_t, frame.origin_map
-        self._pitch = frame.pitch_rad
+        self._pitch, self._tool_shift_t = frame.pitch_rad, frame.tool_shift_t
         self._yaw_goal = frames.yaw_facing(n_map, default_rad=self._yaw_ref)
 
     def _track_target(self, target):
@@ -942,6 +951,7 @@ class Mission:
         """Re-express the current reference in map and make map the working frame."""
         p, v = self._ref_map()
         self._R_map_t, self._origin_map = np.eye(3), np.zeros(3)
+        self._tool_shift_t = np.zeros(3)
         self._traj = MinJerk(self._now_s, p, p, 1.0, v)
         self._depth_correction_m = 0.0      # now part of the new segment
 
@@ -956,8 +966,9 @@ class Mission:
         return p, v, a
 
     def _ref_map(self):
+        """(p, v) of the body's reference in map (frame t's reference plus the tool shift)."""
         p, v = self._ref_t()
-        return self._origin_map + self._R_map_t @ p, self._R_map_t @ v
+        return self._origin_map + self._R_map_t @ (p + self._tool_shift_t), self._R_map_t @ v
 
     def _plan(self, goal_map, v_max):
         """New segment in map from the current reference (continuous position and speed)."""
@@ -970,8 +981,8 @@ class Mission:
         (``ref_map`` = (p_map, v_map) when the frame has just changed)."""
         p_map, v_map = ref_map or self._ref_map()
         R, o = self._R_map_t, self._origin_map
-        self._traj = MinJerk(self._now_s, frames.to_frame(R, o, p_map), goal_t, v_max,
-                             R.T @ v_map)
+        self._traj = MinJerk(self._now_s, frames.to_frame(R, o, p_map) - self._tool_shift_t,
+                             goal_t, v_max, R.T @ v_map)
         self._depth_correction_m = 0.0      # now part of the new segment
 
     def _arrived(self):
@@ -979,7 +990,7 @@ class Mission:
         if not self._traj.done(self._now_s):
             return False
         p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
-        return (np.linalg.norm(p_t - self._traj.p1) < cfg.arrive_tol_m
+        return (np.linalg.norm(p_t - self._tool_shift_t - self._traj.p1) < cfg.arrive_tol_m
                 and np.linalg.norm(self._state.v_map) < cfg.arrive_speed_m_s)
 
     def _setpoint(self):
@@ -1004,7 +1015,7 @@ class Mission:
         releasing = self._mode == Mode.RETREAT and p[2] < self.vehicle.tool_tip_x_m
         return ImpedanceSetpoint(
             R_map_t=self._R_map_t.copy(), origin_map=self._origin_map.copy(),
-            lambda_d_t=p, dlambda_d_t=v, ddlambda_d_t=a,
+            lambda_d_t=p + self._tool_shift_t, dlambda_d_t=v, ddlambda_d_t=a,
             yaw_rad=self._yaw_ref, pitch_rad=self._pitch,
             contact_gains=self._contact_gains or releasing,
             tangential_feedforward=self._mode == Mode.SLIDE,
