@@ -43,11 +43,12 @@ class Flight:
     def state(self):
         return VehicleState(self.t_s, self.p.copy(), self.q.copy(), self.v.copy(), np.zeros(3))
 
-    def step(self, target='default', force_n=None, odom_age_s=0.0):
-        """One tick; ``force_n`` overrides the simulated F/T reading."""
+    def step(self, target='default', force_n=None, odom_age_s=0.0, f_map=None):
+        """One tick; ``force_n`` overrides the simulated F/T reading, ``f_map`` gives its
+        whole force on the vehicle (map)."""
         target = self.target if target == 'default' else target
         f = self.force_n if force_n is None else force_n
-        sp = self.mission.update(self.t_s, self.state(), target, f, odom_age_s)
+        sp = self.mission.update(self.t_s, self.state(), target, f, odom_age_s, f_map)
         self.log.append((self.t_s, self.mission.mode, sp, self.p.copy()))
         self.phases.append(self.mission.phase)
         if self.mission.mode != self.modes[-1]:
@@ -325,6 +326,44 @@ def test_search_timeout_lands():
     search_yaws = [sp.yaw_rad for _, mode, sp, _ in flight.log if mode == Mode.SEARCH]
     assert search_yaws[-1] - search_yaws[0] == pytest.approx(
         cfg.search_yaw_rate_rad_s * cfg.search_timeout_s, abs=0.01)
+
+
+def test_search_backs_off_what_the_tool_touches_then_turns_on():
+    cfg = MissionConfig()
+    flight = _in_mode(Mode.SEARCH, cfg)
+    flight.run_for(2.0, target=None)
+    # below the threshold (F/T noise, a brush) the turn goes on
+    flight.step(target=None, f_map=np.array([0.0, -0.9, 0.0]) * cfg.search_contact_n)
+    assert flight.mission.phase == 'sweep'
+    p0 = flight.p.copy()
+    push = np.array([0.0, -1.2, 0.5])       # the vehicle pushed away from something in +y
+    flight.step(target=None, f_map=push)
+    assert flight.mission.phase == 'clear'
+    start = len(flight.log)
+    flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
+    # backed off along the push, the turn standing still meanwhile
+    np.testing.assert_allclose(flight.p - p0, push / np.linalg.norm(push)
+                               * cfg.search_clearance_m, atol=cfg.arrive_tol_m)
+    assert len({sp.yaw_rad for _, _, sp, _ in flight.log[start:-1]}) == 1
+    yaw = flight.log[-1][2].yaw_rad
+    flight.run_for(1.0, target=None)
+    assert flight.log[-1][2].yaw_rad - yaw == pytest.approx(cfg.search_yaw_rate_rad_s, rel=0.05)
+
+
+def test_a_climb_that_meets_a_wall_turns_where_it_backed_off():
+    cfg = MissionConfig(search_yaw_rate_rad_s=1.0)
+    flight = _in_mode(Mode.SEARCH, cfg)
+    flight.run_until(lambda f: f.mission.phase == 'climb', 10.0, target=None)
+    flight.run_for(0.5, target=None)
+    flight.step(target=None, f_map=np.array([-1.5, 0.0, -1.5]))   # a wall leaning over
+    flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
+    resumed_s, z = flight.t_s, flight.p[2]
+    assert z < cfg.takeoff_altitude_m + cfg.search_climb_m - cfg.search_clearance_m / 2
+    # the second level's whole turn, there, before the search gives up
+    flight.run_to(Mode.LAND, target=None, timeout_s=10.0)
+    assert flight.t_s - resumed_s == pytest.approx(2 * np.pi / cfg.search_yaw_rate_rad_s,
+                                                   abs=0.1)
+    assert flight.mission.status['failsafe_reason'] == 'target_not_found'
 
 
 def test_abort_in_contact_retreats_then_hovers():

@@ -195,7 +195,8 @@ class ControllerCore:
         if (self.config.autostart and not self._autostarted and self._target_source_up
                 and not self.autostart_held):
             self._autostarted = self.mission.inspect()[0]
-        setpoint = self.mission.update(t_s, self._odom, target, self.f_normal_n, odom_age_s)
+        setpoint = self.mission.update(t_s, self._odom, target, self.f_normal_n, odom_age_s,
+                                       self._f_contact_map)
         if self.mission.mode == Mode.IDLE:
             self._was_idle = True
             return self._idle_command(), self._status(t_s, odom_age_s, {}, target)

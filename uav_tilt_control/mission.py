@@ -65,6 +65,11 @@ class MissionConfig:
     search_yaw_rate_rad_s: float = param(0.35, lo=0.0, hi=1.0)  # 0: hover and wait
     search_climb_m: float = param(0.8, lo=0.0, hi=10.0)
     search_timeout_s: float = param(75.0, lo=0.5, hi=600.0)
+    # The tool touched something while searching (the turn or the climb under a wall that
+    # leans over the start): a force on it above search_contact_n stops the search, which
+    # backs the body off search_clearance_m along that force and goes on turning there.
+    search_contact_n: float = param(1.0, lo=0.1, hi=50.0)
+    search_clearance_m: float = param(0.6, lo=0.05, hi=5.0)
     confirm_n: int = param(5, lo=1, hi=100)
     confirm_radius_m: float = param(0.15, lo=0.01, hi=2.0)
     confirm_timeout_s: float = param(4.0, lo=0.1, hi=60.0)
@@ -264,6 +269,7 @@ class Mission:
         self.first_touch_peak_n = 0.0
         self._no_force_since_s = None
         self._in_contact = False
+        self._f_contact_map = np.zeros(3)   # the tick's F/T force on the vehicle, map
         self._task_index = -1
         self._records = []
         self.plan_version = 0           # changes whenever a task record does
@@ -281,9 +287,10 @@ class Mission:
 
     @property
     def phase(self):
-        """What the mode is doing: SEARCH 'sweep', 'climb', 'confirm', 'closer'; CONTACT
-        'close', 'touch' ('align' while the creep waits for the tool tip to come back over
-        the target), 'press'; HOVER 'transit' (to the next task); '' otherwise."""
+        """What the mode is doing: SEARCH 'sweep', 'climb', 'confirm', 'closer', 'clear'
+        (backing off what the tool touched); CONTACT 'close', 'touch' ('align' while the
+        creep waits for the tool tip to come back over the target), 'press'; HOVER
+        'transit' (to the next task); '' otherwise."""
         if self._mode == Mode.SEARCH:
             return self._search.phase
         if self._mode == Mode.HOVER:
@@ -405,12 +412,13 @@ class Mission:
 
     # ---- the tick ----
 
-    def update(self, now_s, state, target, f_contact_n, odom_age_s):
+    def update(self, now_s, state, target, f_contact_n, odom_age_s, f_contact_map=None):
         """One control tick: returns the ImpedanceSetpoint for the impedance law.
 
         ``target``: TargetEstimate(p_poi_map, normal_map, age_s, valid) or None;
         ``f_contact_n``: force along the normal from the F/T sensor, positive pushing;
-        ``odom_age_s``: age of the odometry in ``state``.
+        ``odom_age_s``: age of the odometry in ``state``; ``f_contact_map``: the F/T's
+        whole force on the vehicle in map (N), which SEARCH backs away along.
         """
         cfg = self.config
         self._now_s = float(now_s)
@@ -431,6 +439,8 @@ class Mission:
         f_n = float(f_contact_n) if math.isfinite(f_contact_n) else 0.0
         if self._mode in NEAR_WALL and f_n > cfg.force_limit_n:
             self._failsafe('force_limit', Mode.RETREAT)
+        self._f_contact_map = np.zeros(3) if f_contact_map is None or not np.all(
+            np.isfinite(f_contact_map)) else np.asarray(f_contact_map, dtype=float)
         MODES[self._mode].tick(self, target, f_n, stale)
         return self._setpoint()
 
@@ -572,8 +582,22 @@ class Mission:
 
     def _tick_search(self, target, f_n, stale):
         cfg, search = self.config, self._search
+        touched = float(np.linalg.norm(self._f_contact_map))
         if self._time_in_mode() > cfg.search_timeout_s:
             self._fail_task('target_not_found')
+        elif search.phase != 'clear' and touched > cfg.search_contact_n:
+            # back off along the push the vehicle got, then turn on from there (a climb
+            # that met the wall ends where it is)
+            if search.phase == 'climb':
+                search.swept_rad = 0.0      # its turn is still to come
+            search.phase = 'clear'
+            self._plan(self._state.p_map + self._f_contact_map / touched
+                       * cfg.search_clearance_m, cfg.hover_speed_m_s)
+            self._yaw_goal = self._yaw_ref
+            self._event(f'touched something ({touched:.1f} N): backing off')
+        elif search.phase == 'clear':
+            if self._arrived():
+                search.phase = 'sweep'
         elif search.phase in ('confirm', 'closer'):
             self._tick_confirm(target)
         elif self._target_usable(target) and self._now_s >= search.ignore_until_s:
