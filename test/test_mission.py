@@ -351,7 +351,7 @@ def test_search_backs_off_what_the_tool_touches_then_turns_on():
 
 
 def test_a_climb_that_meets_a_wall_turns_where_it_backed_off():
-    cfg = MissionConfig(search_yaw_rate_rad_s=1.0)
+    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
     flight = _in_mode(Mode.SEARCH, cfg)
     flight.run_until(lambda f: f.mission.phase == 'climb', 10.0, target=None)
     flight.run_for(0.5, target=None)
@@ -359,11 +359,39 @@ def test_a_climb_that_meets_a_wall_turns_where_it_backed_off():
     flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
     resumed_s, z = flight.t_s, flight.p[2]
     assert z < cfg.takeoff_altitude_m + cfg.search_climb_m - cfg.search_clearance_m / 2
-    # the second level's whole turn, there, before the search gives up
-    flight.run_to(Mode.LAND, target=None, timeout_s=10.0)
+    # the second level's whole turn, there, before the search goes lower
+    flight.run_until(lambda f: f.mission.phase == 'descend', 10.0, target=None)
     assert flight.t_s - resumed_s == pytest.approx(2 * np.pi / cfg.search_yaw_rate_rad_s,
                                                    abs=0.1)
+
+
+@pytest.mark.parametrize('takeoff_m, low_m', [(1.5, 0.9), (0.8, 0.6)])
+def test_search_turns_at_the_takeoff_altitude_higher_and_lower_then_lands(takeoff_m, low_m):
+    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0,
+                        takeoff_altitude_m=takeoff_m)
+    flight = _in_mode(Mode.SEARCH, cfg)
+    start = len(flight.log)
+    flight.run_to(Mode.LAND, target=None, timeout_s=60.0)
     assert flight.mission.status['failsafe_reason'] == 'target_not_found'
+    # a whole turn at each altitude: takeoff, search_climb_m higher, search_descend_m lower
+    # but no lower than twice land_detect_height_m (0.6 m)
+    turns = {}
+    for (_, mode, sp, p), phase in zip(flight.log[start:], flight.phases[start:]):
+        if mode == Mode.SEARCH and phase == 'sweep':
+            turns.setdefault(round(p[2], 2), []).append(sp.yaw_rad)
+    assert list(turns) == pytest.approx([takeoff_m, takeoff_m + cfg.search_climb_m, low_m])
+    for yaws in turns.values():
+        assert np.ptp(np.unwrap(yaws)) == pytest.approx(2 * np.pi, abs=0.05)
+
+
+def test_the_search_turns_no_faster_than_the_yaw_reference():
+    # asked to sweep at twice yaw_rate_rad_s, a counted turn is still a whole turn
+    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=0.5)
+    flight = _in_mode(Mode.SEARCH, cfg)
+    start = len(flight.log)
+    flight.run_until(lambda f: f.mission.phase == 'climb', 20.0, target=None)
+    yaws = [sp.yaw_rad for _, _, sp, _ in flight.log[start:]]
+    assert np.ptp(np.unwrap(yaws)) == pytest.approx(2 * np.pi, abs=0.02)
 
 
 def test_abort_in_contact_retreats_then_hovers():

@@ -56,15 +56,17 @@ class MissionConfig:
     hover_speed_m_s: float = param(0.5, lo=0.05, hi=3.0)
     hover_settle_s: float = param(1.0, lo=0.0, hi=30.0)     # HOVER before SEARCH on inspect
     yaw_rate_rad_s: float = param(0.5, lo=0.05, hi=3.0)
-    # SEARCH: a full turn at the takeoff altitude, then one more turn search_climb_m higher
-    # (a wider view of a tall wall), until a candidate target is seen; it is confirmed once
-    # confirm_n of its measurements agree within confirm_radius_m. One not confirmed within
-    # confirm_timeout_s is looked at again from confirm_range_m (a small far target is
-    # seen in few frames), then dropped, and the sweep goes on. search_timeout_s in all,
-    # then it lands.
+    # SEARCH: a full turn at the takeoff altitude, one more search_climb_m higher (a wider
+    # view of a tall wall) and one more search_descend_m lower (the camera looks level and
+    # sees 23 degrees down: a low target on a near wall lies below the image), until a
+    # candidate target is seen; it is confirmed once confirm_n of its measurements agree
+    # within confirm_radius_m. One not confirmed within confirm_timeout_s is looked at
+    # again from confirm_range_m (a small far target is seen in few frames), then dropped,
+    # and the sweep goes on. search_timeout_s in all, then it lands.
     search_yaw_rate_rad_s: float = param(0.35, lo=0.0, hi=1.0)  # 0: hover and wait
     search_climb_m: float = param(0.8, lo=0.0, hi=10.0)
-    search_timeout_s: float = param(75.0, lo=0.5, hi=600.0)
+    search_descend_m: float = param(0.6, lo=0.0, hi=10.0)   # not below 2 land_detect_height_m
+    search_timeout_s: float = param(100.0, lo=0.5, hi=600.0)
     # The tool touched something while searching (the turn or the climb under a wall that
     # leans over the start): a force on it above search_contact_n stops the search, which
     # backs the body off search_clearance_m along that force and goes on turning there.
@@ -153,9 +155,6 @@ class TaskRecord:
         if self.success is None:
             return ''
         return 'ok' if self.success else self.reason
-
-
-SEARCH_LEVELS = 2      # full turns: at the takeoff altitude, then search_climb_m higher
 
 
 class TargetFrame(typing.NamedTuple):
@@ -287,8 +286,8 @@ class Mission:
 
     @property
     def phase(self):
-        """What the mode is doing: SEARCH 'sweep', 'climb', 'confirm', 'closer', 'clear'
-        (backing off what the tool touched); CONTACT 'close', 'touch' ('align' while the
+        """What the mode is doing: SEARCH 'sweep', 'climb', 'descend', 'confirm', 'closer',
+        'clear' (backing off what the tool touched); CONTACT 'close', 'touch' ('align' while the
         creep waits for the tool tip to come back over the target), 'press'; HOVER
         'transit' (to the next task); '' otherwise."""
         if self._mode == Mode.SEARCH:
@@ -588,7 +587,7 @@ class Mission:
         elif search.phase != 'clear' and touched > cfg.search_contact_n:
             # back off along the push the vehicle got, then turn on from there (a climb
             # that met the wall ends where it is)
-            if search.phase == 'climb':
+            if search.phase in ('climb', 'descend'):
                 search.swept_rad = 0.0      # its turn is still to come
             search.phase = 'clear'
             self._plan(self._state.p_map + self._f_contact_map / touched
@@ -607,17 +606,25 @@ class Mission:
             d = target[0] - self._state.p_map
             self._yaw_goal = math.atan2(d[1], d[0])
         elif search.phase == 'sweep' and search.swept_rad >= 2.0 * math.pi:
-            if search.level + 1 < SEARCH_LEVELS:
+            levels = self._search_altitudes_m()
+            if search.level + 1 < len(levels):
                 search.level += 1
-                search.phase = 'climb'
                 p = self._ref_map()[0]
-                self._plan(np.array([p[0], p[1], cfg.takeoff_altitude_m + cfg.search_climb_m]),
-                           cfg.climb_speed_m_s)
-                self._event('climbing to search higher')
+                search.phase = 'climb' if levels[search.level] > p[2] else 'descend'
+                self._plan(np.array([p[0], p[1], levels[search.level]]), cfg.climb_speed_m_s)
+                self._event(('climbing' if search.phase == 'climb' else 'descending')
+                            + f' to search at {levels[search.level]:.2f} m')
             else:
                 self._fail_task('target_not_found')
-        elif search.phase == 'climb' and self._arrived():
+        elif search.phase in ('climb', 'descend') and self._arrived():
             search.phase, search.swept_rad = 'sweep', 0.0
+
+    def _search_altitudes_m(self):
+        """The altitudes SEARCH turns at, in turn: takeoff, higher, lower."""
+        cfg = self.config
+        low = max(cfg.takeoff_altitude_m - cfg.search_descend_m,
+                  cfg.ground_z_m + 2.0 * cfg.land_detect_height_m)
+        return (cfg.takeoff_altitude_m, cfg.takeoff_altitude_m + cfg.search_climb_m, low)
 
     def _tick_confirm(self, target):
         """Hold and watch a candidate: confirmed after confirm_n agreeing measurements."""
@@ -1022,8 +1029,10 @@ class Mission:
         dt = self._tick_dt_s()
         self._last_tick_s = self._now_s
         if self._mode == Mode.SEARCH and self._search.phase == 'sweep':
-            self._yaw_goal = self._yaw_ref + cfg.search_yaw_rate_rad_s * dt
-            self._search.swept_rad += cfg.search_yaw_rate_rad_s * dt
+            # no faster than the yaw reference may turn, or the turn counted is not made
+            sweep = min(cfg.search_yaw_rate_rad_s, cfg.yaw_rate_rad_s) * dt
+            self._yaw_goal = self._yaw_ref + sweep
+            self._search.swept_rad += sweep
         err = frames.wrap_angle(self._yaw_goal - self._yaw_ref)
         step = cfg.yaw_rate_rad_s * dt
         self._yaw_ref = frames.wrap_angle(self._yaw_ref + min(max(err, -step), step))
