@@ -955,20 +955,19 @@ class Mission:
         p_poi, n_map = target[0], target[1]
         # tracked every tick, so the frame is rebuilt only when the estimate moves
         key = tuple(np.concatenate((p_poi, n_map)).tolist())
+        self._yaw_goal = frames.yaw_facing(n_map, default_rad=self._yaw_ref)
         if self._target_frame is None or key != self._target_frame.key:
             pitch = frames.pitch_facing(n_map) if cfg.pitch_to_normal else 0.0
             pitch = min(max(pitch, -cfg.max_pitch_rad), cfg.max_pitch_rad)
             R_map_t, origin_map = frames.target_frame_from_normal(p_poi, n_map)
             # the tip is L x_FLU ahead of the body: where x_FLU is not -z_t, the body
             # stands off the normal by L times x_FLU's part in the wall's plane
-            x_tool_t = R_map_t.T @ frames.tool_direction(
-                frames.yaw_facing(n_map, default_rad=self._yaw_ref), pitch)
+            x_tool_t = R_map_t.T @ frames.tool_direction(self._yaw_goal, pitch)
             shift_t = -self.vehicle.tool_tip_x_m * np.array([x_tool_t[0], x_tool_t[1], 0.0])
             self._target_frame = TargetFrame(key, R_map_t, origin_map, pitch, shift_t)
         frame = self._target_frame
         self._R_map_t, self._origin_map = frame.R_map_t, frame.origin_map
         self._pitch, self._tool_shift_t = frame.pitch_rad, frame.tool_shift_t
-        self._yaw_goal = frames.yaw_facing(n_map, default_rad=self._yaw_ref)
 
     def _track_target(self, target):
         # the segment lives in frame t, so a refined estimate moves the whole reference
