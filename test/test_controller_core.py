@@ -4,6 +4,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import ConfigError, from_dict
+from uav_tilt_common.planes import Plane
 from uav_tilt_common.state import VehicleState
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
@@ -109,3 +110,25 @@ def test_ground_truth_is_ignored_with_vision_and_no_target_frames_are_counted():
     assert core.estimator.counters['no_target'] == 1
     _, status = core.tick(0.0, np.zeros(3), DT_S)
     assert not status['target_valid'] and status['target_source'] == 'vision'
+
+
+def test_planes_reach_the_mission_in_map_with_the_pose_at_their_stamp():
+    core = ControllerCore(VEHICLE, ControllerConfig(target_source='vision'))
+    seen = []
+    core.mission.observe_plane = lambda p, n, share: seen.append((p, n, share))
+    # yawed to +y, moving 0.2 m along x between the odometry states: the frame's stamp is
+    # halfway, so the plane is placed from x = 1.1
+    core.on_odometry(_state(0.0, np.pi / 2, (1.0, 2.0, 1.5)))
+    core.on_odometry(_state(0.1, np.pi / 2, (1.2, 2.0, 1.5)))
+    plane = Plane(np.array([0.0, 0.0, 3.0]), np.array([0.0, 0.0, -1.0]), 0.4)
+    assert core.on_planes(0.05, [plane]) == 1
+    (p_map, n_map, share), = seen
+    camera = VEHICLE.camera_in_base()
+    # the optical axis is the body's x (now map +y); the plane 3 m along it, facing back
+    cam_map = np.array([1.1 - camera.p[1], 2.0 + camera.p[0], 1.5 + camera.p[2]])
+    np.testing.assert_allclose(p_map, cam_map + [0.0, 3.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(n_map, [0.0, -1.0, 0.0], atol=1e-9)
+    assert share == 0.4
+    # a frame older than the pose history, or a broken stamp: nothing moved
+    assert core.on_planes(-5.0, [plane]) == 0 and core.on_planes(float('nan'), [plane]) == 0
+    assert len(seen) == 1

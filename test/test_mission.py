@@ -384,6 +384,52 @@ def test_search_turns_at_the_takeoff_altitude_higher_and_lower_then_lands(takeof
         assert np.ptp(np.unwrap(yaws)) == pytest.approx(2 * np.pi, abs=0.05)
 
 
+def test_after_its_turns_the_search_faces_the_wall_it_saw_from_both_ends_then_lands():
+    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
+    flight = _in_mode(Mode.SEARCH, cfg)
+    # a wall 4 m north leaning 20 degrees back, seen from x = -3 to 1 m during the first
+    # turn; and the ground, which is no wall
+    lean = np.radians(20.0)
+    n = np.array([0.0, -np.cos(lean), np.sin(lean)])
+    wall_at_1_5_m = np.array([0.0, 4.0, 1.5])
+
+    def seen(f):
+        if f.mission.phase == 'sweep':
+            x = -3.0 + 4.0 * (f.t_s % 2.0) / 2.0
+            f.mission.observe_plane(wall_at_1_5_m + [x, 0.0, 0.0], n, 0.3)
+            f.mission.observe_plane([x, 2.0, 0.0], [0.0, 0.0, 1.0], 0.4)
+        return f.mission.phase == 'climb'
+    flight.run_until(seen, 20.0, target=None)
+    start = len(flight.log)
+    flight.run_to(Mode.LAND, target=None, timeout_s=120.0)
+    assert flight.mission.status['failsafe_reason'] == 'target_not_found'
+    phases = flight.phases[start:]
+    assert 'face' in phases and phases.index('descend') < phases.index('face')
+    # after the three turns: a sweep across the wall from in front of each end of what was
+    # seen, search_face_m out from it horizontally at the takeoff altitude, looking at it
+    sweeps = {}
+    first = phases.index('face')
+    for (_, mode, sp, p), phase in zip(flight.log[start + first:], phases[first:]):
+        if mode == Mode.SEARCH and phase == 'sweep':
+            sweeps.setdefault((round(p[0], 1), round(p[1], 1), round(p[2], 1)), []).append(
+                sp.yaw_rad)
+    assert [k[1] for k in sweeps] == pytest.approx([4.0 - cfg.search_face_m] * 2, abs=0.1)
+    assert sorted(k[0] for k in sweeps) == pytest.approx([-3.0, 1.0], abs=0.1)
+    for (x, y, z), yaws in sweeps.items():
+        assert z == pytest.approx(cfg.takeoff_altitude_m, abs=0.05)
+        yaws = np.unwrap(yaws)
+        assert np.ptp(yaws) == pytest.approx(cfg.search_face_turn_rad, abs=0.05)
+        # across the wall: centred on the heading that looks into it (north)
+        assert np.mean([yaws.min(), yaws.max()]) == pytest.approx(np.pi / 2, abs=0.05)
+
+
+def test_without_a_wall_seen_the_search_lands_after_its_turns():
+    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
+    flight = _in_mode(Mode.SEARCH, cfg)
+    flight.run_to(Mode.LAND, target=None, timeout_s=60.0)
+    assert 'face' not in flight.phases
+
+
 def test_the_search_turns_no_faster_than_the_yaw_reference():
     # asked to sweep at twice yaw_rate_rad_s, a counted turn is still a whole turn
     cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=0.5)

@@ -1,6 +1,7 @@
 """The mission beyond the easy world, in-process with vision in the loop (the nodes' cores
 and the deployed detector): a target out of view at takeoff, a target 4.5-5 m away, two
-bolt plates 1 m apart (with and without a hint), a 50,000 N/m wall, gusts. Every run must
+bolt plates 1 m apart (with and without a hint), a 50,000 N/m wall, gusts, a target seen
+more than 70 degrees off its normal from wherever the search turns. Every run must
 meet the demo's bar: tool tip within 1 cm of the point of interest along the surface, the
 push within 0.1 N mean and 0.2 N RMS of the setpoint over the hold, contact never lost.
 
@@ -16,13 +17,14 @@ import pytest
 
 from uav_tilt_common.config import from_dict
 from uav_tilt_common.geometry import wall_point, wall_rotation
+from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.scenario import Scenario, check_scenario
 from uav_tilt_sim.world import PANEL_THICKNESS_M
 from uav_tilt_tools.fly import fly, site_overrides
 
 MODEL = pathlib.Path(__file__).resolve().parent.parent / 'models' / 'detector_int8.onnx'
 SETPOINT_N = 5.0
-SEEDS = np.random.default_rng().integers(0, 2**31 - 1, size=8)
+SEEDS = np.random.default_rng().integers(0, 2**31 - 1, size=9)
 NOISE = dict(imu_gyro_rad_s=0.003, imu_accel_m_s2=0.05, odom_pos_m=0.001, ft_force_n=0.05,
              depth_m=0.002)
 
@@ -60,6 +62,13 @@ def _worlds():
             dict(cls='bolt_plate', u_m=0.2, v_m=1.4, target=True),
             dict(cls='hazard_sign', u_m=-0.6, v_m=1.6)],
             wind=dict(mean_m_s=[0.7, 1.87, 0.0], gust_std_m_s=1.2, gust_tau_s=1.0)), None),
+        # a wall 2 m away leaning over the start, a low plate at its side
+        'steep': (_scenario(SEEDS[7], dict(position_m=[2.0, 0.5],
+                                           yaw_deg=float(rng.uniform(-45.0, -35.0)),
+                                           inclination_deg=-25.0), [
+            dict(cls='bolt_plate', u_m=float(rng.uniform(-1.2, -0.8)), v_m=0.8, target=True),
+            dict(cls='hazard_sign', u_m=0.0, v_m=1.0)],
+            start_yaw_deg=float(rng.uniform(-180.0, 180.0))), None),
     }
 
 
@@ -140,3 +149,18 @@ def test_a_50000_n_per_m_wall_is_touched_gently_and_held(flights):
 def test_gusts_do_not_move_the_tool_off_the_point(flights):
     _, result = flights['gusts']
     _meets_the_bar(result, 'gusts 1.2 m/s std, mean 2 m/s')
+
+
+def test_a_target_seen_far_off_its_normal_is_faced_and_inspected(flights):
+    scenario, result = flights['steep']
+    # from the start, at each altitude the search turns at, the plate is seen more than
+    # 70 degrees off its normal (the detector is trained to 45): the search faces the wall
+    poi = _plate_pois(scenario)[0]
+    wall = scenario.wall
+    normal = wall_rotation(wall.yaw_deg, wall.inclination_deg)[:, 2]
+    cfg = MissionConfig()
+    for z in (cfg.takeoff_altitude_m, cfg.takeoff_altitude_m + cfg.search_climb_m,
+              cfg.takeoff_altitude_m - cfg.search_descend_m):
+        sight = np.array([0.0, 0.0, z]) - poi
+        assert np.degrees(np.arccos(sight @ normal / np.linalg.norm(sight))) > 70.0
+    _meets_the_bar(result, f'wall yaw {wall.yaw_deg:.0f} deg')

@@ -26,6 +26,7 @@ CAMERA_INFO = 'camera/camera_info'
 TARGET_POSE = 'target/pose'
 TARGET_CANDIDATES = 'target/candidates'
 VISION_DEBUG_IMAGE = 'vision/debug_image'
+VISION_PLANES = 'vision/planes'
 SETPOINT_POSE = 'setpoint/pose'
 GROUND_TRUTH_ODOM = 'ground_truth/odom'
 GROUND_TRUTH_TARGET = 'ground_truth/target'
@@ -55,6 +56,7 @@ TOPIC_TYPES = {
     CAMERA_INFO: 'sensor_msgs/msg/CameraInfo',
     TARGET_POSE: 'geometry_msgs/msg/PoseWithCovarianceStamped',
     VISION_DEBUG_IMAGE: 'sensor_msgs/msg/Image',
+    VISION_PLANES: 'sensor_msgs/msg/PointCloud2',
     SETPOINT_POSE: 'geometry_msgs/msg/PoseStamped',
     GROUND_TRUTH_ODOM: 'nav_msgs/msg/Odometry',
     GROUND_TRUTH_TARGET: 'geometry_msgs/msg/PoseStamped',

@@ -10,6 +10,7 @@ from sensor_msgs.msg import CameraInfo, Image, Imu, JointState, PointCloud2, Poi
 
 from uav_tilt_common import cdr, names
 from uav_tilt_common.geometry import quat_to_matrix
+from uav_tilt_common.planes import PLANE_FIELDS, planes_from_array, planes_to_array
 from uav_tilt_common.state import VehicleState
 from uav_tilt_common.targets import CANDIDATE_FIELDS, candidates_from_array, candidates_to_array
 
@@ -238,32 +239,52 @@ def _fmt(value):
 
 def candidates_msg(candidates, stamp, frame_id=names.FRAME_CAMERA):
     """target/candidates: a PointCloud2 of float32 CANDIDATE_FIELDS, one point each."""
-    rows = candidates_to_array(candidates)
+    return _cloud_msg(candidates_to_array(candidates), CANDIDATE_FIELDS, stamp, frame_id)
+
+
+def candidates_of_msg(msg):
+    """The TargetCandidates of a target/candidates message; ValueError when its layout is
+    not :func:`candidates_msg`'s."""
+    return candidates_from_array(_cloud_rows(msg, CANDIDATE_FIELDS))
+
+
+def planes_msg(planes, stamp, frame_id=names.FRAME_CAMERA):
+    """vision/planes: a PointCloud2 of float32 PLANE_FIELDS, one point per plane."""
+    return _cloud_msg(planes_to_array(planes), PLANE_FIELDS, stamp, frame_id)
+
+
+def planes_of_msg(msg):
+    """The Planes of a vision/planes message; ValueError when its layout is not
+    :func:`planes_msg`'s or a plane is not valid."""
+    return planes_from_array(_cloud_rows(msg, PLANE_FIELDS))
+
+
+def _cloud_msg(rows, fields, stamp, frame_id):
+    """A PointCloud2 of float32 ``fields``, one point per row."""
     msg = PointCloud2()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
     msg.height, msg.width = 1, len(rows)
     msg.fields = [PointField(name=name, offset=4 * i, datatype=PointField.FLOAT32, count=1)
-                  for i, name in enumerate(CANDIDATE_FIELDS)]
+                  for i, name in enumerate(fields)]
     msg.is_bigendian = False
-    msg.point_step = 4 * len(CANDIDATE_FIELDS)
+    msg.point_step = 4 * len(fields)
     msg.row_step = msg.point_step * len(rows)
     msg.is_dense = True
     msg.data = rows.astype('<f4').tobytes()
     return msg
 
 
-def candidates_of_msg(msg):
-    """The TargetCandidates of a target/candidates message; ValueError when its layout is
-    not :func:`candidates_msg`'s."""
+def _cloud_rows(msg, fields):
+    """The float32 rows of a :func:`_cloud_msg` PointCloud2; ValueError on another layout."""
     names_ = tuple(f.name for f in msg.fields)
-    if names_ != CANDIDATE_FIELDS or any(f.datatype != PointField.FLOAT32 for f in msg.fields) \
-            or msg.point_step != 4 * len(CANDIDATE_FIELDS) \
+    if names_ != fields or any(f.datatype != PointField.FLOAT32 for f in msg.fields) \
+            or msg.point_step != 4 * len(fields) \
             or len(msg.data) != msg.point_step * msg.width * msg.height:
-        raise ValueError(f'unexpected candidate layout: fields {names_}, '
+        raise ValueError(f'unexpected point layout: fields {names_}, '
                          f'point_step {msg.point_step}, {len(msg.data)} bytes')
     dtype = np.dtype('>f4' if msg.is_bigendian else '<f4')
-    return candidates_from_array(np.frombuffer(bytes(msg.data), dtype=dtype))
+    return np.frombuffer(bytes(msg.data), dtype=dtype)
 
 
 def status_value(text):

@@ -139,6 +139,19 @@ class ControllerCore:
         return self.estimator.add_candidates(
             stamp_s, [(c.p_cam, c.n_cam, c.cov_cam) for c in candidates])
 
+    def on_planes(self, stamp_s, planes):
+        """Vision's ``vision/planes`` of one frame (Planes in the camera optical frame):
+        moved to map with the pose at the frame's stamp, for the mission's search; returns
+        how many were moved (none without a pose at that stamp)."""
+        pose = self.estimator.pose_at(stamp_s) if math.isfinite(stamp_s) else None
+        if pose is None:
+            return 0
+        map_cam = pose @ self.vehicle.camera_in_base()
+        for plane in planes:
+            self.mission.observe_plane(map_cam.apply(plane.point_cam),
+                                       map_cam.rotate(plane.normal_cam), plane.share)
+        return len(planes)
+
     def on_ground_truth_target(self, p_map, q_map_t, target_id=''):
         """Evaluation mode only: the true pose (map) of the target ``target_id`` ('' = the
         target of a one-touch inspection); ignored with vision."""

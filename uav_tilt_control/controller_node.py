@@ -76,6 +76,7 @@ class ControllerNode(Node):
         sub(self, Odometry, names.ODOM, self.on_odom, q, raw=True)
         sub(self, WrenchStamped, names.EE_WRENCH, self.on_wrench, q, raw=True)
         sub(self, PointCloud2, names.TARGET_CANDIDATES, self.on_candidates, q)
+        sub(self, PointCloud2, names.VISION_PLANES, self.on_planes, q)
         sub(self, PoseStamped, names.SETPOINT_POSE, self.on_setpoint, q)
         if self.cfg.target_source == 'ground_truth':
             for target_id in ['', *self.cfg.site.target_ids]:
@@ -173,6 +174,17 @@ class ControllerNode(Node):
             self._reject('layout', f'target/candidates: {err}')
             return
         self.core.on_target_candidates(ros_msgs.from_stamp(msg.header.stamp), candidates)
+
+    def on_planes(self, msg):
+        """The planes vision saw in one frame, camera optical frame (for the search)."""
+        if not self._frame_ok(msg.header.frame_id, names.FRAME_CAMERA, 'vision/planes'):
+            return
+        try:
+            planes = ros_msgs.planes_of_msg(msg)
+        except ValueError as err:
+            self._reject('layout', f'vision/planes: {err}')
+            return
+        self.core.on_planes(ros_msgs.from_stamp(msg.header.stamp), planes)
 
     def on_ground_truth(self, msg, target_id=''):
         """Evaluation mode: the true pose in map of target ``target_id``."""

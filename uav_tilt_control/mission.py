@@ -29,6 +29,7 @@ from uav_tilt_control.plan import Slide, Touch
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.trajectory import MIN_JERK_PEAK, MinJerk, PolylineCruise, Ramp
 from uav_tilt_control.types import ImpedanceSetpoint
+from uav_tilt_control.walls import WallMemory
 
 DEFAULT_CONTACT_FORCE_N = 5.0
 __all__ = ['DEFAULT_CONTACT_FORCE_N', 'MODES', 'MinJerk', 'Mission', 'MissionConfig', 'Mode',
@@ -62,11 +63,17 @@ class MissionConfig:
     # candidate target is seen; it is confirmed once confirm_n of its measurements agree
     # within confirm_radius_m. One not confirmed within confirm_timeout_s is looked at
     # again from confirm_range_m (a small far target is seen in few frames), then dropped,
-    # and the sweep goes on. search_timeout_s in all, then it lands.
+    # and the sweep goes on. After the three turns, the search faces the wall vision saw
+    # most (vision/planes): from search_face_m in front of each end of what it saw of it,
+    # at the takeoff altitude, it sweeps search_face_turn_rad across the wall (a target
+    # seen far off its normal from the start is seen nearly head-on there).
+    # search_timeout_s in all, then it lands.
     search_yaw_rate_rad_s: float = param(0.35, lo=0.0, hi=1.0)  # 0: hover and wait
     search_climb_m: float = param(0.8, lo=0.0, hi=10.0)
     search_descend_m: float = param(0.6, lo=0.0, hi=10.0)   # not below 2 land_detect_height_m
-    search_timeout_s: float = param(100.0, lo=0.5, hi=600.0)
+    search_face_m: float = param(2.5, lo=0.0, hi=20.0)      # 0: no facing
+    search_face_turn_rad: float = param(2.1, lo=0.1, hi=6.3)
+    search_timeout_s: float = param(150.0, lo=0.5, hi=600.0)
     # The tool touched something while searching (the turn or the climb under a wall that
     # leans over the start): a force on it above search_contact_n stops the search, which
     # backs the body off search_clearance_m along that force and goes on turning there.
@@ -176,6 +183,10 @@ class SearchState:
         self.phase = 'sweep'
         self.level = 0
         self.swept_rad = 0.0
+        self.turn_rad = 2.0 * math.pi   # what this sweep turns
+        self.walls = WallMemory()
+        self.face_points = None         # the points to face the wall from, once planned
+        self.face_yaw = 0.0
         self.resume_phase = 'sweep'
         self.since_s = 0.0
         self.ignore_until_s = -math.inf
@@ -411,6 +422,11 @@ class Mission:
 
     # ---- the tick ----
 
+    def observe_plane(self, point_map, normal_map, share):
+        """A plane vision saw (map; share of its frame): SEARCH remembers the walls."""
+        if self._mode == Mode.SEARCH:
+            self._search.walls.observe(point_map, normal_map, share)
+
     def update(self, now_s, state, target, f_contact_n, odom_age_s, f_contact_map=None):
         """One control tick: returns the ImpedanceSetpoint for the impedance law.
 
@@ -605,19 +621,45 @@ class Mission:
             # face it: the detector sees it best in the middle of the image
             d = target[0] - self._state.p_map
             self._yaw_goal = math.atan2(d[1], d[0])
-        elif search.phase == 'sweep' and search.swept_rad >= 2.0 * math.pi:
+        elif search.phase == 'sweep' and search.swept_rad >= search.turn_rad:
             levels = self._search_altitudes_m()
-            if search.level + 1 < len(levels):
+            if search.face_points is None and search.level + 1 < len(levels):
                 search.level += 1
                 p = self._ref_map()[0]
                 search.phase = 'climb' if levels[search.level] > p[2] else 'descend'
                 self._plan(np.array([p[0], p[1], levels[search.level]]), cfg.climb_speed_m_s)
                 self._event(('climbing' if search.phase == 'climb' else 'descending')
                             + f' to search at {levels[search.level]:.2f} m')
-            else:
+            elif not self._face_next():
                 self._fail_task('target_not_found')
         elif search.phase in ('climb', 'descend') and self._arrived():
             search.phase, search.swept_rad = 'sweep', 0.0
+        elif search.phase == 'face' and self._arrived():
+            # turn to one side of the wall first, then sweep across it
+            self._yaw_goal = search.face_yaw - 0.5 * search.turn_rad
+            if abs(frames.wrap_angle(self._yaw_goal - self._yaw_ref)) < cfg.arrive_yaw_tol_rad:
+                search.phase, search.swept_rad = 'sweep', 0.0
+
+    def _face_next(self):
+        """Fly to the next point to face the wall from (planned from the wall seen most
+        on the first call); False when there is none."""
+        cfg, search = self.config, self._search
+        if search.face_points is None:
+            wall = search.walls.best() if cfg.search_face_m > 0.0 else None
+            if wall is None:
+                return False
+            points, search.face_yaw = wall.face_points(
+                cfg.search_face_m, cfg.takeoff_altitude_m, cfg.search_face_m)
+            p = self._ref_map()[0]
+            search.face_points = sorted(points, key=lambda q: float(np.linalg.norm(q - p)))
+        if not search.face_points:
+            return False
+        goal = search.face_points.pop(0)
+        search.phase, search.turn_rad = 'face', cfg.search_face_turn_rad
+        self._plan(goal, cfg.hover_speed_m_s)
+        self._yaw_goal = search.face_yaw - 0.5 * search.turn_rad
+        self._event('facing the wall from ({:.2f}, {:.2f}, {:.2f})'.format(*goal))
+        return True
 
     def _search_altitudes_m(self):
         """The altitudes SEARCH turns at, in turn: takeoff, higher, lower."""

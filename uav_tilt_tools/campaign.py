@@ -26,7 +26,7 @@ import tempfile
 import numpy as np
 
 from uav_tilt_common.config import ConfigError, from_dict
-from uav_tilt_tools.fly import jsonable
+from uav_tilt_tools.fly import DURATION_S, jsonable
 from uav_tilt_common.targets import OBJECT_CLASSES
 from uav_tilt_control.site import HINT_ERROR_M
 from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
@@ -47,7 +47,6 @@ MEAN_WIND_M_S = 2.0
 GUST_PEAK_M_S = 3.0           # 3-sigma gust excursion
 MASS_MISMATCH = 0.15
 LOOKALIKE_PROB = 0.3          # a second bolt plate; the draw then has a hint (a plan)
-DURATION_S = 150.0
 
 
 def random_draw(seed, corners=False):

@@ -40,6 +40,7 @@ VISION_TYPES = {
     names.CAMERA_INFO: 'sensor_msgs/msg/CameraInfo',
     names.TARGET_CANDIDATES: 'sensor_msgs/msg/PointCloud2',
     names.TARGET_POSE: 'geometry_msgs/msg/PoseWithCovarianceStamped',
+    names.VISION_PLANES: 'sensor_msgs/msg/PointCloud2',
     names.VISION_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
 }
 
@@ -134,6 +135,9 @@ class FlightBag:
         self._write(names.TARGET_CANDIDATES, ros_msgs.candidates_msg(result.candidates, stamp),
                     processed_ns)
         self._write(names.TARGET_POSE, pose_msg(result, stamp), processed_ns)
+        if result.planes is not None:
+            self._write(names.VISION_PLANES, ros_msgs.planes_msg(result.planes, stamp),
+                        processed_ns)
         self._latency_ms.append((processed_ns - rendered_ns) * 1e-6)
         self._frames += 1
         self._found += int(result.found)

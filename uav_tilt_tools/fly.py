@@ -23,7 +23,8 @@ from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.site_params import site_overrides
 
-DURATION_S = 150.0
+# a whole search (mission.search_timeout_s) and an inspection after it
+DURATION_S = 210.0
 __all__ = ['DURATION_S', 'check_plan', 'failure_of', 'fly', 'jsonable', 'register',
            'site_overrides']
 

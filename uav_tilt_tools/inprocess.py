@@ -21,8 +21,9 @@ from uav_tilt_tools.task_metrics import task_results, with_tasks
 class Flight:
     """A plant and a controller stepped together; keeps a per-tick log.
 
-    ``vision(plant, t_s)`` (optional) returns ``(stamp_s, candidates)`` of a frame, as
-    ``target/candidates`` carries them, or None when there is no frame this tick.
+    ``vision(plant, t_s)`` (optional) returns ``(stamp_s, candidates, planes)`` of a frame,
+    as ``target/candidates`` and ``vision/planes`` carry them (planes None when the frame
+    was not looked at for them), or None when there is no frame this tick.
     ``recorder(flight, sensors, command)`` (optional) sees every tick after the controller
     (:class:`uav_tilt_tools.flight_bag.FlightBag` writes it as the node graph's topics).
     """
@@ -62,7 +63,10 @@ class Flight:
         core.on_wrench(sensors.ee_force_n, sensors.ee_torque_nm)
         frame = self.vision(plant, sensors.t_s) if self.vision is not None else None
         if frame is not None:
-            core.on_target_candidates(*frame)
+            stamp_s, candidates, planes = frame
+            core.on_target_candidates(stamp_s, candidates)
+            if planes is not None:
+                core.on_planes(stamp_s, planes)
         start = time.perf_counter()
         command, self.status = core.tick(sensors.t_s, sensors.gyro_rad_s, plant.dt_tick,
                                          sensors.accel_m_s2)
@@ -177,8 +181,9 @@ def run_mission(scenario, controller_config=None, duration_s=120.0, vehicle=None
 
 class CameraVision:
     """Vision in the loop without ROS: renders the eye-in-hand camera at its rate and runs
-    the VisionPipeline; each frame gives its target candidates stamped with the frame time
-    (as vision_node stamps target/candidates), an empty list included. ``last_frame`` is
+    the VisionPipeline; each frame gives its target candidates and planes stamped with the
+    frame time (as vision_node stamps target/candidates and vision/planes), an empty list
+    included. ``last_frame`` is
     (stamp_s, FrameResult, rendered_ns, processed_ns) of the newest frame (wall clock ns
     when the image was ready and when the pipeline was done with it), or None."""
 
@@ -190,7 +195,8 @@ class CameraVision:
         self.last_frame = None
 
     def __call__(self, plant, t_s):
-        """(stamp_s, candidates) of this tick's frame, or None when none is rendered."""
+        """(stamp_s, candidates, planes) of this tick's frame, or None when none is
+        rendered."""
         if plant.tick % self.every:
             return None
         rgb, depth, _ = plant.render()
@@ -199,7 +205,7 @@ class CameraVision:
         self.last_frame = (t_s, result, rendered_ns, time.time_ns())
         self.frames += 1
         self.found += int(result.found)
-        return t_s, result.candidates
+        return t_s, result.candidates, result.planes
 
 
 def camera_vision(plant_config, model_path, backend='auto', vision_config=None, threads=0):

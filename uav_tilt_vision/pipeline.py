@@ -8,7 +8,8 @@ magnified tile (a far target is a dozen pixels). Inside each box the POI (bolt h
 found by morphology, and the depth image around it gives the 3D point, the surface normal and
 their covariance in the camera optical frame. Every target-class box of a frame with a
 POI is a candidate (the tracked one first), so that the controller can pick the one it
-is after among look-alikes.
+is after among look-alikes. Every ``planes.every`` frames the depth image's large planes
+(walls, the ground) are looked for too, for a search that faces the wall.
 """
 import contextlib
 import dataclasses
@@ -20,14 +21,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uav_tilt_common.config import nested, param
+from uav_tilt_common.planes import Plane
 from uav_tilt_common.targets import OBJECT_CLASSES, TargetCandidate
 from uav_tilt_vision.boxes import box_iou
 from uav_tilt_vision.klt_tracker import KltBoxTracker, KltConfig
+from uav_tilt_vision.planes import PlaneConfig, find_planes
 from uav_tilt_vision.poi import find_poi
 from uav_tilt_vision.target_pose import CameraIntrinsics, estimate_target_pose, \
     pose_quaternion_from_normal
 
-STAGES = ('detector', 'tracker', 'poi', 'pose')
+STAGES = ('detector', 'tracker', 'poi', 'pose', 'planes')
 MAX_CANDIDATES = 6
 # A detection continues the track when it overlaps the tracked box at least this much.
 TRACK_IOU = 0.3
@@ -55,6 +58,7 @@ class VisionConfig:
     pixel_sigma_px: float = param(0.5, lo=0.01, hi=10.0,
                                   doc='POI pixel noise (pose covariance)')
     klt: KltConfig = nested(KltConfig)
+    planes: PlaneConfig = nested(PlaneConfig)
 
 
 @dataclasses.dataclass
@@ -73,6 +77,7 @@ class FrameResult:
     track_points: np.ndarray | None = None  # (N, 2) KLT points after this frame
     candidates: list[TargetCandidate] = dataclasses.field(
         default_factory=list)       # tracked first
+    planes: list[Plane] | None = None   # None: not looked for in this frame
     timings_ms: dict[str, float] = dataclasses.field(
         default_factory=lambda: dict.fromkeys(STAGES, 0.0))
 
@@ -98,11 +103,17 @@ class VisionPipeline:
         self._last_box: NDArray[np.float64] | None = None   # the tracked box of the frame before
         self._track_score = 0.0     # the detector's score of the tracked box
         self._next_tile = 0         # the zoom grid's tile to look at next
+        self._frames = 0
 
     def process(self, rgb: NDArray[np.uint8], depth_m: NDArray[np.floating[Any]],
                 stamp_s: float) -> FrameResult:
         """One frame: uint8 RGB (H, W, 3) and depth (H, W) metres -> :class:`FrameResult`."""
         res = FrameResult(stamp_s)
+        every = self.config.planes.every
+        if every and self._frames % every == 0:
+            with _timer(res, 'planes'):
+                res.planes = find_planes(depth_m, self.intrinsics, self.config.planes)
+        self._frames += 1
         gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
         boxes: list[tuple[NDArray[np.float64], float]] | None = None
         if self._since_detect < self.config.detect_every:

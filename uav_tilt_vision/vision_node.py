@@ -119,6 +119,8 @@ class VisionNode(Node):
                                                 names.TARGET_POSE, ros_qos.CONTROL)
         self.pub_candidates = ros_qos.quiet_publisher(self, PointCloud2,
                                                       names.TARGET_CANDIDATES, ros_qos.CONTROL)
+        self.pub_planes = ros_qos.quiet_publisher(self, PointCloud2, names.VISION_PLANES,
+                                                  ros_qos.CONTROL)
         self.pub_debug = self.create_publisher(Image, names.VISION_DEBUG_IMAGE,
                                                ros_qos.CAMERA_PUB)
         self.pub_status = ros_qos.quiet_publisher(self, DiagnosticArray, names.VISION_STATUS,
@@ -195,6 +197,8 @@ class VisionNode(Node):
         result = self.pipeline.process(rgb, depth, ros_msgs.from_stamp(stamp))
         self.pub_candidates.publish(ros_msgs.candidates_msg(result.candidates, stamp))
         self.pub_pose.publish(pose_msg(result, stamp))
+        if result.planes is not None:
+            self.pub_planes.publish(ros_msgs.planes_msg(result.planes, stamp))
         if self.pub_debug.get_subscription_count():
             self.pub_debug.publish(ros_msgs.image_msg(draw_debug(rgb, result), stamp))
         self.counts['frames_processed'] += 1
