@@ -11,7 +11,7 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from ros_graph import REPO, start, stop
 from uav_tilt_common import names, resources, ros_msgs, ros_qos
@@ -141,6 +141,7 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
     # The probe subscribes first, so that it is matched before vision's first pose.
     odom = {}
     probe.record(names.TARGET_POSE, PoseWithCovarianceStamped, KEEP_ALL)
+    probe.record(names.VISION_PLANES, PointCloud2, KEEP_ALL)
     probe.record(names.VISION_STATUS, DiagnosticArray, ros_qos.STATUS)
     # camera_info carries each frame's stamp without the image load on the test process
     probe.record(names.CAMERA_INFO, CameraInfo, KEEP_ALL)
@@ -189,12 +190,30 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
     assert len(seen) >= 10 and len(set(seen) & image_stamps) >= 0.8 * len(seen)
     assert np.all(np.diff(stamps) > 0) and all(s % CAMERA_PERIOD_NS < 1000 for s in stamps)
 
-    if latest_status(probe)['backend'] == 'none':
-        pytest.skip('no detector weights in models/: the pose check needs a trained model')
     gt = probe.messages[names.GROUND_TRUTH_TARGET][-1].pose
     poi_map = ros_msgs.vector_of(gt.position)
     normal_map = Rotation.from_quat([gt.orientation.x, gt.orientation.y, gt.orientation.z,
                                      gt.orientation.w]).as_matrix()[:, 2]
+    # vision/planes every 5th frame: the wall 1 m ahead fills the view, nothing else does
+    planes = probe.messages[names.VISION_PLANES]
+    every = VisionNodeConfig().planes.every
+    assert len(planes) == pytest.approx(len(poses) / every, abs=0.15 * len(poses) / every + 1)
+    walls = [(m, ros_msgs.planes_of_msg(m)) for m in planes
+             if ros_msgs.stamp_ns(m.header.stamp) in odom]
+    assert len(walls) >= 0.5 * len(planes) and all(len(found) == 1 for _, found in walls)
+    wall_err = []
+    for msg, (wall,) in walls:
+        p_cam_map, R_map_cam = camera_in_map(odom[ros_msgs.stamp_ns(msg.header.stamp)])
+        assert wall.share > 0.9
+        wall_err.append((np.degrees(np.arccos(min(R_map_cam @ wall.normal_cam @ normal_map,
+                                                  1.0))),
+                         abs((p_cam_map + R_map_cam @ wall.point_cam - poi_map) @ normal_map)))
+    # the centroid on the wall's face, which the plate (1 cm) barely leaves
+    angle_deg, offset_m = np.median(wall_err, axis=0)
+    assert angle_deg < 1.0 and offset_m < 0.015, (angle_deg, offset_m)
+
+    if latest_status(probe)['backend'] == 'none':
+        pytest.skip('no detector weights in models/: the pose check needs a trained model')
     # The target stays in view the whole time (hover_scenario).
     found = [m for m in poses if m.pose.covariance[0] != -1.0]
     assert len(found) >= 0.8 * len(poses), ''.join(

@@ -109,7 +109,7 @@ def hovering_plant_drifting_sideways():
 def test_detects_one_frame_in_five_and_tracks_in_between_while_moving():
     plant, K, detector = hovering_plant_drifting_sideways()
     pipeline = VisionPipeline(detector, K, VisionConfig(detect_every=5))
-    pos_err, boxes_u = [], []
+    pos_err, boxes_u, planes_at = [], [], []
     try:
         for frame in range(30):
             for _ in range(FRAME_TICKS):
@@ -118,6 +118,10 @@ def test_detects_one_frame_in_five_and_tracks_in_between_while_moving():
             result = pipeline.process(rgb, depth, plant.t_s)
             assert result.detected == (frame % 5 == 0)
             assert result.tracked == (frame % 5 != 0)
+            if result.planes is not None:
+                # the wall 1 m ahead fills the view
+                planes_at.append(frame)
+                assert result.planes[0].share > 0.9 and result.timings_ms['planes'] > 0.0
             assert result.found
             pos_err.append(errors(result, plant)[0])
             boxes_u.append(result.box_xyxy[0])
@@ -125,6 +129,8 @@ def test_detects_one_frame_in_five_and_tracks_in_between_while_moving():
     finally:
         plant.close()
     assert detector.calls == 6
+    # the plane search every fifth frame too, between the detector's
+    assert np.diff(planes_at).tolist() == [5] * 5 and not set(planes_at) & {0, 5, 10}
     assert np.median(pos_err) <= 0.01
     assert abs(boxes_u[-1] - boxes_u[0]) > 5.0     # the target did move in the image
 
@@ -196,6 +202,25 @@ def test_a_target_too_small_for_the_detector_is_found_in_a_magnified_tile(zoom):
                                                         zoom_beyond_m=3.0))
         assert all(near.process(rgb, np.full_like(depth, 2.9), k / 30.0).box_xyxy is None
                    for k in range(n_tiles))
+
+
+class NothingDetector:
+    def predict(self, image, conf_thres=0.25, iou_thres=0.45):
+        return np.zeros((0, 6))
+
+
+def test_with_the_detector_on_every_frame_the_plane_search_still_runs():
+    # nothing found: the detector runs on every frame, the plane search on every other
+    # period of planes.every rather than never
+    plant, K, _ = make_plant(*facing_start(np.random.default_rng(2), 1.0))
+    try:
+        rgb, depth, _ = plant.render()
+        pipeline = VisionPipeline(NothingDetector(), K, VisionConfig(detect_every=5))
+        results = [pipeline.process(rgb, depth, k / 30.0) for k in range(40)]
+    finally:
+        plant.close()
+    assert all(r.detected for r in results)
+    assert [k for k, r in enumerate(results) if r.planes is not None] == [9, 19, 29, 39]
 
 
 def test_without_a_detector_every_frame_is_no_target():

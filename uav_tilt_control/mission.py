@@ -601,9 +601,9 @@ class Mission:
         if self._time_in_mode() > cfg.search_timeout_s:
             self._fail_task('target_not_found')
         elif search.phase != 'clear' and touched > cfg.search_contact_n:
-            # back off along the push the vehicle got, then turn on from there (a climb
-            # that met the wall ends where it is)
-            if search.phase in ('climb', 'descend'):
+            # back off along the push the vehicle got, then turn on from there (a climb,
+            # or a flight to face the wall, that met the wall ends where it is)
+            if search.phase in ('climb', 'descend', 'face'):
                 search.swept_rad = 0.0      # its turn is still to come
             search.phase = 'clear'
             self._plan(self._state.p_map + self._f_contact_map / touched

@@ -4,8 +4,9 @@ reference_ms_p50: fp32 YOLOv3-tiny (reference widths, untrained: only speed matt
 the same 320x256 input; detector_ms_p50: the deployed model on its backend, the two
 timed in turns on the same frames; speedup: their ratio; pipeline_fps /
 pipeline_ms_p95: the whole VisionPipeline.process on frames rendered by the plant while
-the vehicle drifts past the target. Torch and ONNX Runtime get 2 threads each (the
-Jetson-class budget).
+the vehicle drifts past the target; planes_ms_p50: its plane search (vision/planes) on
+the frames that run it. Torch and ONNX Runtime get 2 threads each (the Jetson-class
+budget).
 """
 import time
 
@@ -91,14 +92,17 @@ def bench_vision(seconds=10.0, model_path=None, backend=None):
                       speedup=float(np.median(ref_ms) / np.median(det_ms)),
                       backend=detector.backend, model=detector.model_path)
     # Each pass restarts the detect/track schedule on the same sequence.
-    pipe_ms = []
+    pipe_ms, planes_ms = [], []
     start = time.perf_counter()
     while not pipe_ms or time.perf_counter() - start < seconds / 2.0:
         pipeline = VisionPipeline(detector, K, cfg)
         for rgb, depth, t_s in frames:
             t0 = time.perf_counter()
-            pipeline.process(rgb, depth, t_s)
+            frame = pipeline.process(rgb, depth, t_s)
             pipe_ms.append((time.perf_counter() - t0) * 1e3)
+            if frame.planes is not None:
+                planes_ms.append(frame.timings_ms['planes'])
     result.update(pipeline_fps=float(1e3 / np.mean(pipe_ms)),
-                  pipeline_ms_p95=float(np.percentile(pipe_ms, 95)))
+                  pipeline_ms_p95=float(np.percentile(pipe_ms, 95)),
+                  planes_ms_p50=float(np.median(planes_ms)) if planes_ms else None)
     return result

@@ -8,8 +8,9 @@ magnified tile (a far target is a dozen pixels). Inside each box the POI (bolt h
 found by morphology, and the depth image around it gives the 3D point, the surface normal and
 their covariance in the camera optical frame. Every target-class box of a frame with a
 POI is a candidate (the tracked one first), so that the controller can pick the one it
-is after among look-alikes. Every ``planes.every`` frames the depth image's large planes
-(walls, the ground) are looked for too, for a search that faces the wall.
+is after among look-alikes. Every ``planes.every`` frames (one without a detector run when
+it can) the depth image's large planes (walls, the ground) are looked for too, for a search
+that faces the wall.
 """
 import contextlib
 import dataclasses
@@ -103,17 +104,12 @@ class VisionPipeline:
         self._last_box: NDArray[np.float64] | None = None   # the tracked box of the frame before
         self._track_score = 0.0     # the detector's score of the tracked box
         self._next_tile = 0         # the zoom grid's tile to look at next
-        self._frames = 0
+        self._since_planes = 0
 
     def process(self, rgb: NDArray[np.uint8], depth_m: NDArray[np.floating[Any]],
                 stamp_s: float) -> FrameResult:
         """One frame: uint8 RGB (H, W, 3) and depth (H, W) metres -> :class:`FrameResult`."""
         res = FrameResult(stamp_s)
-        every = self.config.planes.every
-        if every and self._frames % every == 0:
-            with _timer(res, 'planes'):
-                res.planes = find_planes(depth_m, self.intrinsics, self.config.planes)
-        self._frames += 1
         gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
         boxes: list[tuple[NDArray[np.float64], float]] | None = None
         if self._since_detect < self.config.detect_every:
@@ -122,6 +118,7 @@ class VisionPipeline:
         if boxes is None:
             boxes = self._detect(rgb, gray, depth_m, res)
         self._since_detect += 1
+        self._look_for_planes(depth_m, res)
         if not boxes:
             return res
         res.box_xyxy = boxes[0][0]
@@ -138,6 +135,18 @@ class VisionPipeline:
                 res.q_cam = pose_quaternion_from_normal(n_cam)
                 res.found = True
         return res
+
+    def _look_for_planes(self, depth_m: NDArray[np.floating[Any]], res: FrameResult) -> None:
+        """The depth image's planes every ``planes.every`` frames, on a frame the detector
+        did not run on (their costs do not add up) unless that waits another period."""
+        every = self.config.planes.every
+        self._since_planes += 1
+        if not every or self._since_planes < every or (
+                res.detected and self._since_planes < 2 * every):
+            return
+        self._since_planes = 0
+        with _timer(res, 'planes'):
+            res.planes = find_planes(depth_m, self.intrinsics, self.config.planes)
 
     def _pose_in(self, rgb: NDArray[np.uint8], depth_m: NDArray[np.floating[Any]],
                  box: NDArray[np.float64], res: FrameResult, tracked: bool
