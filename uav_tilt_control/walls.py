@@ -5,7 +5,7 @@ A plane whose normal is within ``MAX_TILT_RAD`` of horizontal is a wall (the gro
 ceilings are not). Planes whose normals agree within ``SAME_ANGLE_RAD`` and whose offsets
 within ``SAME_OFFSET_M`` are one wall; each keeps its weight (the shares it was seen
 with, summed), its normal and centroid (weighted means) and how far along it the
-centroids reached: a turn in front of a wall sees its parts one after another.
+centroids reach: a turn in front of a wall sees its parts one after another.
 """
 import dataclasses
 import math
@@ -21,14 +21,33 @@ SAME_OFFSET_M = 0.5
 
 @dataclasses.dataclass
 class Wall:
-    """A wall in map: weighted centroid and unit normal (towards where it was seen from),
-    the weight, and the extent of the centroids along it (m, from ``point_map`` along the
-    horizontal ``x`` of :func:`frames.target_frame_from_normal`)."""
+    """What a search saw of one wall in map: the centroids of its planes, their unit
+    normals (towards where they were seen from) and the shares they were seen with."""
 
-    point_map: np.ndarray
-    normal_map: np.ndarray
-    weight: float
-    along_m: tuple[float, float] = (0.0, 0.0)
+    centroids: list = dataclasses.field(default_factory=list)
+    normals: list = dataclasses.field(default_factory=list)
+    shares: list = dataclasses.field(default_factory=list)
+
+    @property
+    def weight(self):
+        return float(sum(self.shares))
+
+    @property
+    def point_map(self):
+        """The centroids' mean, weighted by share."""
+        return np.average(self.centroids, axis=0, weights=self.shares)
+
+    @property
+    def normal_map(self):
+        return frames.unit(np.average(self.normals, axis=0, weights=self.shares))
+
+    @property
+    def along_m(self):
+        """How far the centroids reach along the wall, (min, max) in m from ``point_map``
+        along the horizontal ``x`` of :func:`frames.target_frame_from_normal`."""
+        R, origin = frames.target_frame_from_normal(self.point_map, self.normal_map)
+        along = (np.asarray(self.centroids) - origin) @ R[:, 0]
+        return float(along.min()), float(along.max())
 
     def face_points(self, standoff_m, altitude_m, spacing_m):
         """Points at ``altitude_m``, ``standoff_m`` out from the wall horizontally, in
@@ -58,28 +77,16 @@ class WallMemory:
         p = np.asarray(point_map, dtype=float)
         if abs(n[2]) > math.sin(MAX_TILT_RAD) or not (share > 0.0 and np.all(np.isfinite(p))):
             return False
-        for wall in self.walls:
-            if n @ wall.normal_map >= math.cos(SAME_ANGLE_RAD) and \
-                    abs((p - wall.point_map) @ wall.normal_map) <= SAME_OFFSET_M:
-                self._merge(wall, p, n, share)
-                return True
-        self.walls.append(Wall(p, n, float(share)))
+        wall = next((w for w in self.walls if n @ w.normal_map >= math.cos(SAME_ANGLE_RAD)
+                     and abs((p - w.point_map) @ w.normal_map) <= SAME_OFFSET_M), None)
+        if wall is None:
+            wall = Wall()
+            self.walls.append(wall)
+        wall.centroids.append(p)
+        wall.normals.append(n)
+        wall.shares.append(float(share))
         return True
 
     def best(self):
         """The wall seen most, or None."""
         return max(self.walls, key=lambda w: w.weight, default=None)
-
-    @staticmethod
-    def _merge(wall, p, n, share):
-        total = wall.weight + share
-        R, _ = frames.target_frame_from_normal(wall.point_map, wall.normal_map)
-        along = (p - wall.point_map) @ R[:, 0]
-        lo, hi = min(wall.along_m[0], along), max(wall.along_m[1], along)
-        point = (wall.point_map * wall.weight + p * share) / total
-        normal = frames.unit(wall.normal_map * wall.weight + n * share)
-        # the extent is kept about the new centroid, along the new horizontal
-        R_new, _ = frames.target_frame_from_normal(point, normal)
-        shift = (point - wall.point_map) @ R_new[:, 0]
-        wall.point_map, wall.normal_map, wall.weight = point, normal, total
-        wall.along_m = (lo - shift, hi - shift)
