@@ -166,25 +166,26 @@ class ControllerNode(Node):
 
     def on_candidates(self, msg):
         """Vision's target candidates of one frame, camera optical frame (none: no target)."""
-        if not self._frame_ok(msg.header.frame_id, names.FRAME_CAMERA, 'target/candidates'):
-            return
-        try:
-            candidates = ros_msgs.candidates_of_msg(msg)
-        except ValueError as err:
-            self._reject('layout', f'target/candidates: {err}')
-            return
-        self.core.on_target_candidates(ros_msgs.from_stamp(msg.header.stamp), candidates)
+        candidates = self._camera_cloud(msg, names.TARGET_CANDIDATES, ros_msgs.candidates_of_msg)
+        if candidates is not None:
+            self.core.on_target_candidates(ros_msgs.from_stamp(msg.header.stamp), candidates)
 
     def on_planes(self, msg):
         """The planes vision saw in one frame, camera optical frame (for the search)."""
-        if not self._frame_ok(msg.header.frame_id, names.FRAME_CAMERA, 'vision/planes'):
-            return
+        planes = self._camera_cloud(msg, names.VISION_PLANES, ros_msgs.planes_of_msg)
+        if planes is not None:
+            self.core.on_planes(ros_msgs.from_stamp(msg.header.stamp), planes)
+
+    def _camera_cloud(self, msg, topic, decode):
+        """``decode(msg)`` of a PointCloud2 of vision's, or None (rejected and counted) when
+        it is not in the camera optical frame or not laid out as ``decode`` expects."""
+        if not self._frame_ok(msg.header.frame_id, names.FRAME_CAMERA, topic):
+            return None
         try:
-            planes = ros_msgs.planes_of_msg(msg)
+            return decode(msg)
         except ValueError as err:
-            self._reject('layout', f'vision/planes: {err}')
-            return
-        self.core.on_planes(ros_msgs.from_stamp(msg.header.stamp), planes)
+            self._reject('layout', f'{topic}: {err}')
+            return None
 
     def on_ground_truth(self, msg, target_id=''):
         """Evaluation mode: the true pose in map of target ``target_id``."""

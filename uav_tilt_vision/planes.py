@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from uav_tilt_common.config import param
 from uav_tilt_common.planes import Plane
-from uav_tilt_vision.target_pose import CameraIntrinsics, deproject
+from uav_tilt_vision.target_pose import CameraIntrinsics, deproject, sampled_plane_residuals
 
 _TRIALS = 64
 _REFINE_ROUNDS = 2
@@ -65,14 +65,9 @@ def find_planes(depth_m: NDArray[np.floating[Any]], K: CameraIntrinsics,
 def _ransac(pts: NDArray[np.float64], band: NDArray[np.float64],
             rng: np.random.Generator) -> NDArray[np.bool_]:
     """Samples on the plane through three sampled points that has the most of them."""
-    tri = pts[rng.integers(0, len(pts), (_TRIALS, 3))]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    norms = np.linalg.norm(normals, axis=1)
-    ok = norms > 1e-9
-    if not ok.any():
+    on = sampled_plane_residuals(pts, rng, _TRIALS) <= band
+    if not len(on):
         return np.zeros(len(pts), bool)
-    normals = normals[ok] / norms[ok, None]
-    on = np.abs(np.einsum('tk,tnk->tn', normals, pts[None] - tri[ok, None, 0])) <= band
     return on[int(np.argmax(on.sum(axis=1)))]
 
 

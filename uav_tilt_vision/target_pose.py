@@ -118,16 +118,23 @@ def _lmeds_inliers(pts: NDArray[np.float64], sigma_floor_m: float,
                    n_trials: int = _LMEDS_TRIALS) -> NDArray[np.bool_]:
     """Inliers of the plane through 3 sampled points with the least median residual."""
     rng = np.random.default_rng(0)  # fixed: the same image gives the same pose
+    abs_res = sampled_plane_residuals(pts, rng, n_trials)
+    if not len(abs_res):
+        return np.zeros(len(pts), bool)
+    best = int(np.argmin(np.median(abs_res, axis=1)))
+    return _inliers(abs_res[best], np.ones(len(pts), bool), sigma_floor_m)
+
+
+def sampled_plane_residuals(pts: NDArray[np.float64], rng: np.random.Generator,
+                            n_trials: int) -> NDArray[np.float64]:
+    """(T, N) distances of the N points to each of T <= ``n_trials`` planes through three
+    of them drawn at random (degenerate triples left out)."""
     tri = pts[rng.integers(0, len(pts), (n_trials, 3))]
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     norms = np.linalg.norm(normals, axis=1)
     ok = norms > 1e-12
-    if not ok.any():
-        return np.zeros(len(pts), bool)
     normals = normals[ok] / norms[ok, None]
-    abs_res = np.abs(np.einsum('tk,tnk->tn', normals, pts[None] - tri[ok, None, 0]))
-    best = int(np.argmin(np.median(abs_res, axis=1)))
-    return _inliers(abs_res[best], np.ones(len(pts), bool), sigma_floor_m)
+    return np.abs(np.einsum('tk,tnk->tn', normals, pts[None] - tri[ok, None, 0]))
 
 
 def _covariance(p: NDArray[np.float64], n: NDArray[np.float64], c: NDArray[np.float64],
