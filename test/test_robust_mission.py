@@ -1,8 +1,7 @@
 """The mission beyond the easy world, in-process with vision in the loop (the nodes' cores
 and the deployed detector): a target out of view at takeoff, a target 4.5-5 m away, two
-bolt plates 1 m apart (with and without a hint), a 50,000 N/m wall, gusts, targets seen
-more than 70 degrees off their normal from wherever the search turns (under a wall leaning
-over the start, and beside a vertical one). Every run must
+bolt plates 1 m apart (with and without a hint), a 50,000 N/m wall, gusts, a target seen
+more than 70 degrees off its normal from wherever the search turns. Every run must
 meet the demo's bar: tool tip within 1 cm of the point of interest along the surface, the
 push within 0.1 N mean and 0.2 N RMS of the setpoint over the hold, contact never lost.
 
@@ -25,7 +24,7 @@ from uav_tilt_tools.fly import fly, site_overrides
 
 MODEL = pathlib.Path(__file__).resolve().parent.parent / 'models' / 'detector_int8.onnx'
 SETPOINT_N = 5.0
-SEEDS = np.random.default_rng().integers(0, 2**31 - 1, size=10)
+SEEDS = np.random.default_rng().integers(0, 2**31 - 1, size=9)
 NOISE = dict(imu_gyro_rad_s=0.003, imu_accel_m_s2=0.05, odom_pos_m=0.001, ft_force_n=0.05,
              depth_m=0.002)
 
@@ -63,15 +62,8 @@ def _worlds():
             dict(cls='bolt_plate', u_m=0.2, v_m=1.4, target=True),
             dict(cls='hazard_sign', u_m=-0.6, v_m=1.6)],
             wind=dict(mean_m_s=[0.7, 1.87, 0.0], gust_std_m_s=1.2, gust_tau_s=1.0)), None),
-        # a wall 2 m away leaning over the start, a low plate at its side
-        'steep': (_scenario(SEEDS[7], dict(position_m=[2.0, 0.5],
-                                           yaw_deg=float(rng.uniform(-45.0, -35.0)),
-                                           inclination_deg=-25.0), [
-            dict(cls='bolt_plate', u_m=float(rng.uniform(-1.2, -0.8)), v_m=0.8, target=True),
-            dict(cls='hazard_sign', u_m=0.0, v_m=1.0)],
-            start_yaw_deg=float(rng.uniform(-180.0, 180.0))), None),
         # a wall 0.9 m from the start, the plate 1.5-2 m to its side
-        'side': (_scenario(SEEDS[8], dict(position_m=[2.0, 0.5],
+        'side': (_scenario(SEEDS[7], dict(position_m=[2.0, 0.5],
                                           yaw_deg=float(rng.uniform(-55.0, -45.0))), [
             dict(cls='bolt_plate', u_m=float(rng.uniform(-2.0, -1.5)), v_m=0.8, target=True),
             dict(cls='hazard_sign', u_m=0.0, v_m=1.0)],
@@ -171,20 +163,14 @@ def _seen_off_normal_deg(scenario):
     return [np.degrees(np.arccos(s @ normal / np.linalg.norm(s))) for s in sights]
 
 
-@pytest.mark.parametrize('world', ['steep', 'side'])
-def test_a_target_seen_far_off_its_normal_is_found_and_inspected(flights, world):
-    # the detector is trained on views up to 45 degrees off: the search faces the wall (or,
-    # under the leaning wall, may see the plate once its back-off has moved it)
-    scenario, result = flights[world]
-    assert min(_seen_off_normal_deg(scenario)) > 70.0
-    _meets_the_bar(result, f'{world}, wall yaw {scenario.wall.yaw_deg:.0f} deg')
-
-
-def test_beside_a_vertical_wall_the_plate_is_found_only_from_in_front_of_it(flights):
-    # nothing touches the search there: the plate, 72 degrees and more off its normal from
-    # the start, is confirmed only after the search's three turns, when it faces the wall
+def test_a_target_seen_far_off_its_normal_is_found_from_in_front_of_the_wall(flights):
+    # the detector is trained on views up to 45 degrees off; beside a vertical wall nothing
+    # touches the search, and the plate is confirmed only after the search's three turns,
+    # when it faces the wall
     scenario, result = flights['side']
+    assert min(_seen_off_normal_deg(scenario)) > 70.0
+    _meets_the_bar(result, f'wall yaw {scenario.wall.yaw_deg:.0f} deg')
     modes = dict((m, t) for t, m in reversed(result['mode_history']))
     cfg = MissionConfig()
     turns_s = 3 * 2.0 * np.pi / min(cfg.search_yaw_rate_rad_s, cfg.yaw_rate_rad_s)
-    assert result['success'] and modes['APPROACH'] - modes['SEARCH'] > turns_s, result
+    assert modes['APPROACH'] - modes['SEARCH'] > turns_s, result
