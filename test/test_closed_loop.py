@@ -9,8 +9,8 @@ from scipy.spatial.transform import Rotation
 from uav_tilt_control.controller_core import ControllerConfig
 from uav_tilt_common.modes import Mode
 from uav_tilt_control.mission import MissionConfig
-from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_tools.inprocess import Flight, run_mission
+from uav_tilt_sim.scenario import ObjectConfig, WallConfig, check_scenario, load_scenario
+from uav_tilt_tools.inprocess import Flight, mission_result, run_mission
 
 SCENARIO = load_scenario()
 ALTITUDE_M = 1.5
@@ -193,6 +193,54 @@ def test_force_above_the_limit_retreats():
         assert flight.log[-1]['push_n'] == 0.0
     finally:
         flight.close()
+
+
+def _leaning_wall(rng, lean):
+    """(scenario, the mode that meets the wall) of a fresh draw. 'over': a wall leaning
+    over the start by 25-30 degrees, its ground line 0.75-0.95 m ahead, the tool towards it:
+    the tool tip, 0.45 m ahead, meets it 0.6-1.1 m up, below the take-off altitude.
+    'away': a wall 2.5 m away leaning away by 22-25 degrees, the target 2.2-2.4 m up it:
+    the descent from the standoff, 0.6 m off the wall there, meets the wall 0.8-1.2 m up."""
+    yaw_deg = rng.uniform(-180.0, 180.0)
+    facing = np.array([np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))])
+    if lean == 'over':
+        d0_m, inclination_deg, v_m = rng.uniform(0.75, 0.95), -rng.uniform(25.0, 30.0), 1.4
+    else:
+        d0_m, inclination_deg, v_m = 2.5, rng.uniform(22.0, 25.0), rng.uniform(2.2, 2.4)
+    wall = WallConfig(position_m=(d0_m * facing).tolist(), yaw_deg=yaw_deg,
+                      inclination_deg=inclination_deg)
+    scenario = dataclasses.replace(
+        SCENARIO, seed=int(rng.integers(2**31)), wall=wall,
+        objects=[ObjectConfig(u_m=float(rng.uniform(-0.5, 0.5)), v_m=float(v_m), target=True)],
+        start_yaw_deg=yaw_deg + rng.uniform(-15.0, 15.0))
+    return check_scenario(scenario), 'TAKEOFF' if lean == 'over' else 'LAND'
+
+
+@pytest.mark.parametrize('lean', ['over', 'away'])
+def test_a_take_off_or_landing_that_meets_a_leaning_wall_backs_off_and_goes_on(lean):
+    scenario, meets = _leaning_wall(np.random.default_rng(), lean)
+    config = _config()
+    flight = Flight(scenario, config)
+    try:
+        flight.step()
+        assert flight.core.inspect()[0]
+        flight.run(120.0, until=lambda f: f.core.mission.mode == Mode.IDLE)
+        events = list(flight.core.mission.events)
+        result = mission_result(flight)
+        landed_ft_n = np.linalg.norm(flight.log[-1]['ft_force_ee_n'])
+    finally:
+        flight.close()
+    what = f'{scenario.wall}, start yaw {scenario.start_yaw_deg:.1f}: {result}'
+    assert [e for e in events if e['mode'] == meets and e['phase'] == 'clear'], what
+    assert [m for _, m in result['mode_history']] == [
+        'IDLE', 'TAKEOFF', 'HOVER', 'SEARCH', 'APPROACH', 'CONTACT', 'HOLD', 'RETREAT', 'LAND',
+        'IDLE'], what
+    assert result['success'] and result['contact_lost'] == 0, what
+    assert result['poi_error_max_m'] < 0.01, what
+    assert result['force_mean_n'] == pytest.approx(5.0, abs=0.1), what
+    assert result['force_rms_error_n'] <= 0.2, what
+    # landed clear of the wall, not resting the tool on it
+    assert landed_ft_n < config.mission.free_flight_contact_n, what
 
 
 def test_the_camera_rendering_or_not_leaves_wind_noise_and_trajectory_unchanged():

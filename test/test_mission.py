@@ -333,7 +333,7 @@ def test_search_backs_off_what_the_tool_touches_then_turns_on():
     flight = _in_mode(Mode.SEARCH, cfg)
     flight.run_for(2.0, target=None)
     # below the threshold (F/T noise, a brush) the turn goes on
-    flight.step(target=None, f_map=np.array([0.0, -0.9, 0.0]) * cfg.search_contact_n)
+    flight.step(target=None, f_map=np.array([0.0, -0.9, 0.0]) * cfg.free_flight_contact_n)
     assert flight.mission.phase == 'sweep'
     p0 = flight.p.copy()
     push = np.array([0.0, -1.2, 0.5])       # the vehicle pushed away from something in +y
@@ -343,7 +343,7 @@ def test_search_backs_off_what_the_tool_touches_then_turns_on():
     flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
     # backed off along the push, the turn standing still meanwhile
     np.testing.assert_allclose(flight.p - p0, push / np.linalg.norm(push)
-                               * cfg.search_clearance_m, atol=cfg.arrive_tol_m)
+                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
     assert len({sp.yaw_rad for _, _, sp, _ in flight.log[start:-1]}) == 1
     yaw = flight.log[-1][2].yaw_rad
     flight.run_for(1.0, target=None)
@@ -358,11 +358,116 @@ def test_a_climb_that_meets_a_wall_turns_where_it_backed_off():
     flight.step(target=None, f_map=np.array([-1.5, 0.0, -1.5]))   # a wall leaning over
     flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
     resumed_s, z = flight.t_s, flight.p[2]
-    assert z < cfg.takeoff_altitude_m + cfg.search_climb_m - cfg.search_clearance_m / 2
+    assert z < cfg.takeoff_altitude_m + cfg.search_climb_m - cfg.free_flight_clearance_m / 2
     # the second level's whole turn, there, before the search goes lower
     flight.run_until(lambda f: f.mission.phase == 'descend', 10.0, target=None)
     assert flight.t_s - resumed_s == pytest.approx(2 * np.pi / cfg.search_yaw_rate_rad_s,
                                                    abs=0.1)
+
+
+def _climb_time_s(cfg):
+    """The take-off's own climb from the ground, MinJerk at climb_speed_m_s."""
+    return MinJerk(0.0, np.array([0.0, 0.0, GEAR_Z_M]),
+                   np.array([0.0, 0.0, cfg.takeoff_altitude_m]), cfg.climb_speed_m_s).T
+
+
+def test_a_takeoff_that_meets_a_wall_backs_off_horizontally_and_climbs_on():
+    cfg = MissionConfig()
+    flight = Flight(cfg)
+    assert flight.mission.inspect()[0]
+    flight.run_until(lambda f: f.p[2] > 0.8, 10.0, target=None)
+    # below the threshold the climb goes on
+    flight.step(target=None, f_map=np.array([-0.9, 0.0, 0.0]) * cfg.free_flight_contact_n)
+    assert flight.mission.phase == ''
+    # the tool under a wall leaning over the start: pushed away from it and down
+    push = np.array([-1.4, 0.6, -0.7])
+    p0 = flight.p.copy()
+    flight.step(target=None, f_map=push)
+    assert (flight.mission.mode, flight.mission.phase) == (Mode.TAKEOFF, 'clear')
+    flight.run_until(lambda f: f.mission.phase == '', 10.0, target=None)
+    away = push * [1.0, 1.0, 0.0]
+    moved = flight.p - p0
+    # backed off along the push's horizontal part only: the ground is below
+    np.testing.assert_allclose(moved[:2], away[:2] / np.linalg.norm(away)
+                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
+    assert abs(moved[2]) < cfg.arrive_tol_m
+    # then up to the take-off altitude from there, and on with the mission
+    flight.run_to(Mode.HOVER, target=None, timeout_s=20.0)
+    np.testing.assert_allclose(flight.p, [*(p0[:2] + moved[:2]), cfg.takeoff_altitude_m],
+                               atol=cfg.arrive_tol_m)
+    flight.run_to(Mode.SEARCH, target=None, timeout_s=5.0)
+
+
+def test_a_takeoff_pushed_down_from_above_lands():
+    cfg = MissionConfig()
+    flight = Flight(cfg)
+    assert flight.mission.inspect()[0]
+    flight.run_until(lambda f: f.p[2] > 0.8, 10.0, target=None)
+    # a ceiling: the push has less horizontal part than a wall 70 degrees from vertical
+    flight.step(target=None, f_map=np.array([0.3, 0.0, -1.5]))
+    assert flight.mission.mode == Mode.LAND
+    flight.run_to(Mode.IDLE, target=None, timeout_s=20.0)
+    status = flight.mission.status
+    assert status['failsafe_reason'] == 'takeoff_blocked' and not status['success']
+    assert [r.reason for r in flight.mission.records] == ['not_run']
+
+
+def test_a_takeoff_that_never_reaches_its_altitude_lands():
+    cfg = MissionConfig(takeoff_timeout_s=float(np.random.default_rng().uniform(5.0, 15.0)))
+    flight = Flight(cfg)
+    assert flight.mission.inspect()[0]
+    t0 = flight.t_s
+    # something keeps meeting the tool as it climbs past 1 m
+    while flight.mission.mode == Mode.TAKEOFF:
+        assert flight.t_s < t0 + _climb_time_s(cfg) + cfg.takeoff_timeout_s + 1.0
+        bumped = flight.p[2] > 1.0 and flight.mission.phase == ''
+        flight.step(target=None, f_map=np.array([-1.5, 0.0, 0.0]) if bumped else None)
+    assert flight.mission.mode == Mode.LAND
+    assert flight.t_s - t0 == pytest.approx(_climb_time_s(cfg) + cfg.takeoff_timeout_s,
+                                            abs=2 * DT_S)
+    flight.run_to(Mode.IDLE, target=None, timeout_s=20.0)
+    assert flight.mission.status['failsafe_reason'] == 'takeoff_timeout'
+    assert flight.p[2] == pytest.approx(GEAR_Z_M)
+
+
+def test_a_landing_that_meets_a_wall_backs_off_horizontally_and_descends_on():
+    cfg = MissionConfig()
+    flight = _hovering(cfg)
+    assert flight.mission.land()[0]
+    flight.run_until(lambda f: f.p[2] < 1.0, 10.0, target=None)
+    # a push from below, the ground under the tool, is no obstacle: the descent goes on
+    flight.step(target=None, f_map=np.array([0.2, 0.0, 1.5]))
+    assert (flight.mission.mode, flight.mission.phase) == (Mode.LAND, '')
+    # a wall leaning away from the vehicle, met on the way down: pushed away and up
+    push = np.array([0.3, -1.3, 0.6])
+    p0 = flight.p.copy()
+    flight.step(target=None, f_map=push)
+    assert flight.mission.phase == 'clear'
+    flight.run_until(lambda f: f.mission.phase == '', 10.0, target=None)
+    moved = flight.p - p0
+    np.testing.assert_allclose(moved[:2], push[:2] / np.linalg.norm(push[:2])
+                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
+    assert abs(moved[2]) < cfg.arrive_tol_m
+    flight.run_to(Mode.IDLE, target=None, timeout_s=20.0)
+    np.testing.assert_allclose(flight.p, [*(p0[:2] + moved[:2]), GEAR_Z_M],
+                               atol=cfg.arrive_tol_m)
+
+
+def test_hover_backs_off_what_the_tool_touches_and_holds_there():
+    cfg = MissionConfig()
+    flight = _hovering(cfg)
+    p0 = flight.p.copy()
+    push = np.array([0.5, -1.5, 0.3])
+    flight.step(target=None, f_map=push)
+    assert flight.mission.phase == 'clear'
+    ok, why = flight.mission.set_hover_setpoint([0.0, 0.0, 2.0], 0.0)
+    assert not ok and '(clear)' in why
+    flight.run_until(lambda f: f.mission.phase == '', 10.0, target=None)
+    flight.run_for(2.0, target=None)
+    assert flight.mission.mode == Mode.HOVER
+    np.testing.assert_allclose(flight.p - p0, push / np.linalg.norm(push)
+                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
+    assert flight.mission.set_hover_setpoint([0.0, 0.0, 2.0], 0.0)[0]
 
 
 @pytest.mark.parametrize('takeoff_m, low_m', [(1.5, 0.9), (0.8, 0.6)])

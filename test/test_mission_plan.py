@@ -45,6 +45,7 @@ class PlanFlight:
         self.q = np.array([0.0, 0.0, 0.0, 1.0])
         self.force_n = 0.0
         self.force_override = None
+        self.f_map = None       # the F/T's whole force on the vehicle (map), when given
         self.log = []       # (t, mode, phase, setpoint, p, force, q)
         self.step()
 
@@ -60,7 +61,7 @@ class PlanFlight:
             q = (Rotation.from_euler('z', self.yaw_error_rad) * Rotation.from_quat(q)).as_quat()
         state = VehicleState(self.t_s, self.p.copy(), q, self.v.copy(), np.zeros(3))
         force = self.force_n if self.force_override is None else self.force_override
-        sp = self.mission.update(self.t_s, state, self.target(), force, 0.0)
+        sp = self.mission.update(self.t_s, state, self.target(), force, 0.0, self.f_map)
         self.log.append((self.t_s, self.mission.mode, self.mission.phase, sp, self.p.copy(),
                          self.force_n, self.q.copy()))
         self._track(sp)
@@ -225,6 +226,26 @@ def test_abort_stops_the_plan_and_hovers():
     flight.run_until(lambda f: np.linalg.norm(f.v) < 1e-6, 30.0)
     assert flight.mission.mode == Mode.HOVER and flight.mission.phase == ''
     assert [r.reason for r in flight.mission.records] == ['', 'aborted', 'not_run']
+
+
+def test_a_transit_that_meets_a_wall_backs_off_and_searches_from_there():
+    flight = PlanFlight(_plan(), MissionConfig())
+    cfg = flight.config
+    assert flight.mission.inspect()[0]
+    flight.run_until(lambda f: f.mission.phase == 'transit' and f.mission.task.target == 'b'
+                     and np.linalg.norm(f.v) > 0.2)
+    p0 = flight.p.copy()
+    push = np.array([-0.4, 1.5, 0.0])
+    flight.f_map = push
+    flight.step()
+    flight.f_map = None
+    assert flight.mission.phase == 'clear'
+    flight.run_until(lambda f: f.mission.mode == Mode.SEARCH, 20.0)
+    # searched from where it backed off, not from the look point
+    np.testing.assert_allclose(flight.p - p0, push / np.linalg.norm(push)
+                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
+    flight.run_until(lambda f: f.mission.mode == Mode.IDLE)
+    assert flight.mission.status['task_outcomes'] == 'ok,ok,ok'
 
 
 def test_every_mode_has_its_entry_and_tick_in_the_table():

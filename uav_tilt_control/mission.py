@@ -43,6 +43,10 @@ IN_TARGET_FRAME = NEAR_WALL + (Mode.RETREAT,)
 _NEAR_GROUND = (Mode.IDLE, Mode.TAKEOFF, Mode.LAND, Mode.FAILSAFE_LAND)
 # A task that did not end: the plan stopped before it, or while it ran.
 NOT_RUN = 'not_run'
+# TAKEOFF and LAND back off horizontally; a push whose horizontal part is below this share
+# of it is vertical, with no way around it: from above (a ceiling, a wall leaning over by
+# more than 70 degrees) the take-off lands, from below (the ground) the landing goes on.
+HORIZONTAL_SHARE = math.sin(math.radians(20.0))
 # The touch's alignment check low-passes the tool tip's offset with this time constant:
 # odometry noise (a few mm at the tool's lever arm) averages out, a gust's drift does not.
 ALIGN_TAU_S = 0.1
@@ -54,6 +58,9 @@ class MissionConfig:
 
     takeoff_altitude_m: float = param(1.5, lo=0.3, hi=20.0)
     climb_speed_m_s: float = param(0.5, lo=0.05, hi=3.0)
+    # a take-off that has not reached its altitude this long after its climb's own time
+    # (a wall leaning over the start that its back-offs do not clear) lands
+    takeoff_timeout_s: float = param(20.0, lo=0.0, hi=600.0)
     hover_speed_m_s: float = param(0.5, lo=0.05, hi=3.0)
     hover_settle_s: float = param(1.0, lo=0.0, hi=30.0)     # HOVER before SEARCH on inspect
     yaw_rate_rad_s: float = param(0.5, lo=0.05, hi=3.0)
@@ -74,11 +81,15 @@ class MissionConfig:
     search_face_m: float = param(2.5, lo=0.0, hi=20.0)      # 0: no facing
     search_face_turn_rad: float = param(2.1, lo=0.1, hi=6.3)
     search_timeout_s: float = param(150.0, lo=0.5, hi=600.0)
-    # The tool touched something while searching (the turn or the climb under a wall that
-    # leans over the start): a force on it above search_contact_n stops the search, which
-    # backs the body off search_clearance_m along that force and goes on turning there.
-    search_contact_n: float = param(1.0, lo=0.1, hi=50.0)
-    search_clearance_m: float = param(0.6, lo=0.05, hi=5.0)
+    # The tool touched something in free flight (TAKEOFF, HOVER, SEARCH, LAND: a wall
+    # leaning over the start as the vehicle climbs or turns, a wall on the way to the next
+    # task, one leaning away as it descends): a force on it above free_flight_contact_n
+    # stops what the vehicle was doing, and it backs off free_flight_clearance_m along that
+    # force (phase 'clear'; in TAKEOFF and LAND along its horizontal part, the ground being
+    # below, and a push from above lands the take-off), then goes on from there: the climb,
+    # the turn, the descent; a transit to the next task searches from there.
+    free_flight_contact_n: float = param(1.0, lo=0.1, hi=50.0)
+    free_flight_clearance_m: float = param(0.6, lo=0.05, hi=5.0)
     confirm_n: int = param(5, lo=1, hi=100)
     confirm_radius_m: float = param(0.15, lo=0.01, hi=2.0)
     confirm_timeout_s: float = param(4.0, lo=0.1, hi=60.0)
@@ -272,7 +283,8 @@ class Mission:
         self._aligning = False         # CONTACT touch: the creep paused (touch_align_m)
         self._align_waited_s = 0.0
         self._align_off_t = None        # the tool tip off the target (x_t, y_t), filtered
-        self._hover_phase = ''         # HOVER: 'transit' while flying to the next task
+        self._flight_phase = ''        # TAKEOFF, HOVER, LAND: 'clear'; HOVER 'transit'
+        self._takeoff_deadline_s = math.inf
         self._drop_target = drop_target
         self._search = SearchState()
         self._depth_correction_m = 0.0  # HOLD, SLIDE: from the push error (along -z_t)
@@ -297,14 +309,15 @@ class Mission:
 
     @property
     def phase(self):
-        """What the mode is doing: SEARCH 'sweep', 'climb', 'descend', 'confirm', 'closer',
-        'clear' (backing off what the tool touched); CONTACT 'close', 'touch' ('align' while the
-        creep waits for the tool tip to come back over the target), 'press'; HOVER
-        'transit' (to the next task); '' otherwise."""
+        """What the mode is doing: SEARCH 'sweep', 'climb', 'descend', 'face', 'confirm',
+        'closer', 'clear' (backing off what the tool touched); CONTACT 'close', 'touch'
+        ('align' while the creep waits for the tool tip to come back over the target),
+        'press'; HOVER 'transit' (to the next task), 'clear'; TAKEOFF and LAND 'clear'; ''
+        otherwise."""
         if self._mode == Mode.SEARCH:
             return self._search.phase
-        if self._mode == Mode.HOVER:
-            return self._hover_phase
+        if self._mode in (Mode.TAKEOFF, Mode.HOVER, Mode.LAND):
+            return self._flight_phase
         if self._mode != Mode.CONTACT:
             return ''
         return 'align' if self._contact_phase == 'touch' and self._aligning else \
@@ -385,8 +398,8 @@ class Mission:
             self._stop_plan('aborted')
             if self._mode != Mode.HOVER:
                 self._enter(Mode.HOVER, 'abort')
-            elif self._hover_phase:
-                self._hover_phase = ''      # stop the transit where it is
+            elif self._flight_phase:
+                self._flight_phase = ''     # stop the transit (or back-off) where it is
                 self._plan(self._ref_map()[0], self.config.hover_speed_m_s)
             return True, 'hovering'
         return False, f'nothing to abort in {self._mode.value}'
@@ -413,9 +426,9 @@ class Mission:
         if p.shape != (3,) or not (np.all(np.isfinite(p)) and np.isfinite(yaw_rad)):
             self.rejected_setpoints += 1
             return False, 'setpoint must be 3 finite coordinates and a finite yaw'
-        if self._mode != Mode.HOVER or self._hover_phase:
+        if self._mode != Mode.HOVER or self._flight_phase:
             return False, f'setpoints are accepted in HOVER only, not {self._mode.value}' + (
-                f' ({self._hover_phase})' if self._hover_phase else '')
+                f' ({self._flight_phase})' if self._flight_phase else '')
         self._plan(p, self.config.hover_speed_m_s)
         self._yaw_goal = float(yaw_rad)
         return True, 'setpoint accepted'
@@ -502,7 +515,7 @@ class Mission:
             look[2] = max(look[2], cfg.ground_z_m + 2.0 * cfg.land_detect_height_m)
             if self._mode != Mode.HOVER:
                 self._enter(Mode.HOVER, f'task {index}: to its target')
-            self._hover_phase = 'transit'
+            self._flight_phase = 'transit'
             self._plan(look, cfg.hover_speed_m_s)
             # The camera looks at the hint: along the normal (down at a wall leaning away),
             # or, where the ground raised the look point (a low target on a wall leaning
@@ -565,27 +578,62 @@ class Mission:
         self._yaw_ref = self._yaw_goal = _yaw_of(self._state)
 
     def _enter_takeoff(self, previous, target):
+        cfg = self.config
         p_meas = self._state.p_map
-        goal = np.array([p_meas[0], p_meas[1], self.config.takeoff_altitude_m])
+        goal = np.array([p_meas[0], p_meas[1], cfg.takeoff_altitude_m])
         self._to_map()
-        self._traj = MinJerk(self._now_s, p_meas, goal, self.config.climb_speed_m_s)
+        self._traj = MinJerk(self._now_s, p_meas, goal, cfg.climb_speed_m_s)
+        self._takeoff_deadline_s = self._now_s + self._traj.T + cfg.takeoff_timeout_s
 
     def _tick_takeoff(self, target, f_n, stale):
-        if self._arrived():
+        cfg = self.config
+        vertical = self._clear_vertically(cfg.takeoff_altitude_m, cfg.climb_speed_m_s)
+        if self._now_s > self._takeoff_deadline_s:
+            self._failsafe('takeoff_timeout', Mode.LAND)
+        elif vertical is not None and vertical[2] < 0.0:
+            self._failsafe('takeoff_blocked', Mode.LAND)
+        elif not self._flight_phase and self._arrived():
             self._enter(Mode.HOVER)
 
+    def _clear_vertically(self, z_goal_m, speed_m_s):
+        """TAKEOFF and LAND, every tick: back off horizontally what the tool touched (the
+        ground is below), then climb or descend on to ``z_goal_m`` from there. Returns a push
+        too vertical to back off along (see HORIZONTAL_SHARE), else None."""
+        push = self._bump()
+        if push is not None and self._flight_phase != 'clear':
+            away = push * [1.0, 1.0, 0.0]
+            if np.linalg.norm(away) < HORIZONTAL_SHARE * np.linalg.norm(push):
+                return push
+            self._flight_phase = 'clear'
+            self._back_off(away)
+        elif self._flight_phase == 'clear' and self._arrived():
+            self._flight_phase = ''
+            p = self._ref_map()[0]
+            self._plan(np.array([p[0], p[1], z_goal_m]), speed_m_s)
+        return None
+
     def _enter_hover(self, previous, target):
-        self._hover_phase = ''
+        self._flight_phase = ''
         self._to_map()
         self._plan(self._ref_map()[0], self.config.hover_speed_m_s)
         self._yaw_goal = self._yaw_ref
 
     def _tick_hover(self, target, f_n, stale):
         cfg = self.config
-        if self._hover_phase == 'transit':
+        push = self._bump()
+        if push is not None and self._flight_phase != 'clear':
+            self._flight_phase = 'clear'
+            self._back_off(push)
+        elif self._flight_phase == 'clear':
+            if self._arrived():
+                self._flight_phase = ''
+                if self._plan_running():
+                    # in HOVER a task runs only in transit to its target: look from here
+                    self._enter(Mode.SEARCH, 'searching from where it backed off')
+        elif self._flight_phase == 'transit':
             yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
             if self._arrived() and abs(yaw_err) < cfg.arrive_yaw_tol_rad:
-                self._hover_phase = ''
+                self._flight_phase = ''
                 self._enter(Mode.SEARCH)
         elif self._inspect_pending and self._time_in_mode() >= cfg.hover_settle_s:
             self._inspect_pending = False
@@ -597,19 +645,16 @@ class Mission:
 
     def _tick_search(self, target, f_n, stale):
         cfg, search = self.config, self._search
-        touched = float(np.linalg.norm(self._f_contact_map))
+        push = self._bump()
         if self._time_in_mode() > cfg.search_timeout_s:
             self._fail_task('target_not_found')
-        elif search.phase != 'clear' and touched > cfg.search_contact_n:
-            # back off along the push the vehicle got, then turn on from there (a climb,
-            # or a flight to face the wall, that met the wall ends where it is)
+        elif push is not None and search.phase != 'clear':
+            # turn on from where it backed off (a climb, or a flight to face the wall, that
+            # met the wall ends there)
             if search.phase in ('climb', 'descend', 'face'):
                 search.swept_rad = 0.0      # its turn is still to come
             search.phase = 'clear'
-            self._plan(self._state.p_map + self._f_contact_map / touched
-                       * cfg.search_clearance_m, cfg.hover_speed_m_s)
-            self._yaw_goal = self._yaw_ref
-            self._event(f'touched something ({touched:.1f} N): backing off')
+            self._back_off(push)
         elif search.phase == 'clear':
             if self._arrived():
                 search.phase = 'sweep'
@@ -910,6 +955,11 @@ class Mission:
 
     def _tick_land(self, target, f_n, stale):
         cfg = self.config
+        if self._mode == Mode.LAND:
+            # a wall leaning away from the vehicle comes nearer as it descends
+            self._clear_vertically(cfg.ground_z_m, cfg.descent_rate_m_s)
+            if self._flight_phase:
+                return
         low = self._state.p_map[2] < cfg.ground_z_m + cfg.land_detect_height_m
         slow = np.linalg.norm(self._state.v_map) < cfg.land_detect_speed_m_s
         if not (low and slow):
@@ -939,8 +989,7 @@ class Mission:
             mode == Mode.TARGET_LOST and self._contact_gains)
         if mode != Mode.CONTACT:
             self._contact_phase = ''
-        if mode != Mode.HOVER:
-            self._hover_phase = ''
+        self._flight_phase = ''
         enter = MODES[mode].enter
         if enter is not None:
             enter(self, old, target)
@@ -971,6 +1020,22 @@ class Mission:
         if self._state is None or not self._odom_age_s <= self.config.odom_stale_s:
             return False, 'no fresh odometry'
         return True, ''
+
+    def _bump(self):
+        """The tick's F/T force on the vehicle (map) when it says the tool touched
+        something (above free_flight_contact_n), else None."""
+        touched = float(np.linalg.norm(self._f_contact_map))
+        return self._f_contact_map if touched > self.config.free_flight_contact_n else None
+
+    def _back_off(self, away_map):
+        """Fly free_flight_clearance_m along ``away_map`` from where the body is, not
+        turning meanwhile."""
+        away = np.linalg.norm(away_map)
+        self._plan(self._state.p_map + away_map / away * self.config.free_flight_clearance_m,
+                   self.config.hover_speed_m_s)
+        self._yaw_goal = self._yaw_ref
+        self._event(f'touched something ({np.linalg.norm(self._f_contact_map):.1f} N): '
+                    'backing off')
 
     def _time_in_mode(self):
         return self._now_s - self._t_mode_s
