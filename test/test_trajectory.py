@@ -3,7 +3,8 @@ speed, keeps within the acceleration bound, and its p, v, a are consistent."""
 import numpy as np
 import pytest
 
-from uav_tilt_control.trajectory import Cruise, PolylineCruise
+from uav_tilt_control.trajectory import (BRAKE_ACCEL_M_S2, BRAKE_REACH, MIN_SEGMENT_S,
+                                         Cruise, MinJerk, PolylineCruise)
 
 DT_S = 0.002
 
@@ -55,3 +56,42 @@ def test_a_polyline_stops_at_each_vertex_and_reports_its_progress():
     inside = (t > 1.0) & (t < first.t0_s + first.T)
     np.testing.assert_allclose(progress[inside], np.linalg.norm(p[inside], axis=1), atol=1e-9)
     assert line.done(1.0 + line.T) and not line.done(1.0 + line.T - 1e-6)
+
+
+def _distance_to_segment(p, a, b):
+    d = b - a
+    u = np.clip((p - a) @ d / max(d @ d, 1e-12), 0.0, 1.0)
+    return np.linalg.norm(p - a - np.outer(u, d), axis=1)
+
+
+@pytest.mark.parametrize('draw', range(20))
+def test_a_min_jerk_that_starts_moving_brakes_within_its_bound_and_keeps_near_its_line(draw):
+    """A fresh draw: a start velocity in any direction up to 1 m/s, a segment up to 8 m
+    long. The start velocity is brought to rest at BRAKE_ACCEL_M_S2 where the segment is
+    long enough (the rest-to-rest part adds its own 5.77 d / T^2), so the reference strays
+    from the line between the ends by at most BRAKE_REACH v0 T_brake, however long the
+    segment."""
+    rng = np.random.default_rng()
+    p0 = rng.uniform(-3.0, 3.0, 3)
+    p1 = p0 + rng.normal(size=3) * rng.uniform(0.0, 8.0) / np.sqrt(3.0)
+    v0 = rng.normal(size=3)
+    v0 *= rng.uniform(0.0, 1.0) / np.linalg.norm(v0)
+    seg = MinJerk(2.0, p0, p1, rng.uniform(0.1, 1.0), v0)
+    t = np.arange(2.0, 2.0 + seg.T + 0.5, DT_S)
+    p, v, a = (np.array(x) for x in zip(*(seg.sample(tk) for tk in t)))
+    np.testing.assert_allclose([p[0], v[0], a[0]], [p0, v0, np.zeros(3)], atol=1e-12)
+    np.testing.assert_allclose([p[-1], v[-1], a[-1]], [p1, np.zeros(3), np.zeros(3)],
+                               atol=1e-12)
+    np.testing.assert_allclose(np.diff(p, axis=0), 0.5 * (v[1:] + v[:-1]) * DT_S, atol=1e-6)
+    np.testing.assert_allclose(np.diff(v, axis=0), 0.5 * (a[1:] + a[:-1]) * DT_S, atol=1e-4)
+    speed = np.linalg.norm(v0)
+    assert seg.T_brake <= seg.T
+    assert seg.T_brake <= max(MIN_SEGMENT_S, 3.95 * speed / BRAKE_ACCEL_M_S2)
+    reach = _distance_to_segment(p, p0, p1).max()
+    assert reach <= BRAKE_REACH * speed * seg.T_brake + 1e-9
+    rest_to_rest = 5.7735 * np.linalg.norm(p1 - p0) / seg.T ** 2
+    brake = 3.9403 * speed / seg.T_brake
+    assert np.linalg.norm(a, axis=1).max() <= rest_to_rest + brake + 1e-6
+    if seg.T >= max(MIN_SEGMENT_S, 3.95 * speed / BRAKE_ACCEL_M_S2):
+        # long enough to brake at the bound: it does
+        assert brake <= BRAKE_ACCEL_M_S2 * (1 + 1e-4)

@@ -18,10 +18,22 @@ MIN_SEGMENT_S = 1.0
 # Peak speed of a minimum-jerk segment (and of the 'smootherstep' speed-up of a Cruise,
 # per unit of its mean) is 1.875 times the mean.
 MIN_JERK_PEAK = 1.875
+# A MinJerk segment that starts moving brings that start velocity v0 to rest over
+# T_b = v0 * BRAKE_PEAK / BRAKE_ACCEL_M_S2 (at least MIN_SEGMENT_S, at most the segment):
+# spread over the whole of a long segment, as a single quintic does, it would carry the
+# reference BRAKE_REACH * v0 * T away from the line between the ends (a metre below the
+# ground for a 0.3 m/s descent turned into a 17 s approach). The brake's share of the
+# quintic, h(tau) = tau - 6 tau^3 + 8 tau^4 - 3 tau^5, peaks at BRAKE_REACH in position
+# and BRAKE_PEAK in acceleration (per v0 T_b and v0 / T_b).
+BRAKE_ACCEL_M_S2 = 1.0
+BRAKE_PEAK = 3.9402
+BRAKE_REACH = 16.0 / 81.0
 
 
 class MinJerk:
-    """Quintic from (p0, v0, a=0) to (p1, v=0, a=0) with peak speed about v_max."""
+    """Minimum jerk from (p0, v0, a=0) to (p1, v=0, a=0) with peak speed about v_max: the
+    rest-to-rest quintic from p0 to p1, plus one that brings v0 to rest within about
+    BRAKE_ACCEL_M_S2 and ends where it began."""
 
     def __init__(self, t0_s, p0, p1, v_max, v0=np.zeros(3)):
         self.t0_s = t0_s
@@ -29,10 +41,14 @@ class MinJerk:
         d = self.p1 - p0
         self.T = max(MIN_JERK_PEAK * np.linalg.norm(d) / v_max, MIN_SEGMENT_S)
         T = self.T
-        self._c = np.array([p0, v0, np.zeros(3),
-                            (20 * d - 12 * v0 * T) / (2 * T ** 3),
-                            (-30 * d + 16 * v0 * T) / (2 * T ** 4),
-                            (12 * d - 6 * v0 * T) / (2 * T ** 5)], dtype=float)
+        self.T_brake = min(max(BRAKE_PEAK * np.linalg.norm(v0) / BRAKE_ACCEL_M_S2,
+                               MIN_SEGMENT_S), T)
+        Tb = self.T_brake
+        zero = np.zeros(3)
+        self._c = np.array([p0, zero, zero, 10 * d / T ** 3, -15 * d / T ** 4,
+                            6 * d / T ** 5], dtype=float)
+        self._brake = np.array([zero, v0, zero, -6 * v0 / Tb ** 2, 8 * v0 / Tb ** 3,
+                                -3 * v0 / Tb ** 4], dtype=float)
 
     def done(self, t_s):
         """True once the segment has reached p1."""
@@ -43,13 +59,21 @@ class MinJerk:
         if self.done(t_s):
             return self.p1.copy(), np.zeros(3), np.zeros(3)
         t1 = max(t_s - self.t0_s, 0.0)
-        t2 = t1 * t1
-        t3 = t2 * t1
-        # rows: d^k/dtau^k of (1, tau, ..., tau^5); one product gives p, v and a
-        p, v, a = np.array([[1.0, t1, t2, t3, t3 * t1, t3 * t2],
-                            [0.0, 1.0, 2.0 * t1, 3.0 * t2, 4.0 * t3, 5.0 * t3 * t1],
-                            [0.0, 0.0, 2.0, 6.0 * t1, 12.0 * t2, 20.0 * t3]]) @ self._c
+        rows = _quintic_rows(t1)
+        pva = rows @ self._c
+        if t1 < self.T_brake:
+            pva += rows @ self._brake
+        p, v, a = pva
         return p, v, a
+
+
+def _quintic_rows(t):
+    """Rows d^k/dt^k (k = 0, 1, 2) of (1, t, ..., t^5): one product gives p, v and a."""
+    t2 = t * t
+    t3 = t2 * t
+    return np.array([[1.0, t, t2, t3, t3 * t, t3 * t2],
+                     [0.0, 1.0, 2.0 * t, 3.0 * t2, 4.0 * t3, 5.0 * t3 * t],
+                     [0.0, 0.0, 2.0, 6.0 * t, 12.0 * t2, 20.0 * t3]])
 
 
 class Ramp:
