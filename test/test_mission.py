@@ -318,53 +318,6 @@ def test_no_contact_retreats():
     assert flight.mission.status['failsafe_reason'] == 'no_contact'
 
 
-def _searching(cfg):
-    flight = Flight(cfg)
-    assert flight.mission.inspect()[0]
-    flight.run_to(Mode.SEARCH, target=None, timeout_s=30.0)
-    return flight
-
-
-def test_a_candidate_is_confirmed_once_the_detector_sees_it_again():
-    # vision's tracker carries each detection over the frames between (detect_every)
-    cfg = MissionConfig()
-    flight = _searching(cfg)
-    every = 5
-    for k in range(every * cfg.confirm_detections):
-        flight.step(target=PERFECT._replace(detected=k % every == 0))
-        assert flight.mission.mode == Mode.SEARCH, k
-    flight.step(target=PERFECT._replace(detected=True))
-    assert flight.mission.mode == Mode.APPROACH
-
-
-def test_one_detection_carried_by_the_tracker_is_not_a_target():
-    """A one-off false detection, tracked over the frames after it: looked at closer
-    (it is farther than confirm_range_m), then dropped, and the search turns on."""
-    cfg = MissionConfig()
-    flight = _searching(cfg)
-    flight.step(target=PERFECT)
-    assert flight.mission.phase == 'confirm'
-    flight.run_until(lambda f: f.mission.phase == 'sweep', 60.0,
-                     target=PERFECT._replace(detected=False))
-    reasons = [e['reason'] for e in flight.mission.events]
-    assert 'closer to the candidate' in reasons and reasons[-1] == 'candidate dropped'
-    assert Mode.APPROACH not in flight.modes
-
-
-@pytest.mark.parametrize('gap_frames, confirmed', [(1, True), (2, False)])
-def test_a_candidate_that_comes_and_goes_is_not_a_target(gap_frames, confirmed):
-    """Detected, tracked over four frames, then missing from ``gap_frames`` frames, again
-    and again: a target is in every frame, give or take confirm_max_gap_frames (1)."""
-    cfg = MissionConfig()
-    flight = _searching(cfg)
-    cycle = 5 + gap_frames
-    for k in range(3 * cycle):
-        phase = k % cycle
-        seen = PERFECT._replace(detected=phase == 0, gap_frames=gap_frames if phase == 0 else 0)
-        flight.step(target=seen if phase < 5 else None)
-    assert (Mode.APPROACH in flight.modes) == confirmed
-
-
 def test_search_timeout_lands():
     cfg = MissionConfig(search_timeout_s=2.0, search_yaw_rate_rad_s=0.2)
     flight = _in_mode(Mode.SEARCH, cfg)

@@ -118,8 +118,6 @@ def test_detects_one_frame_in_five_and_tracks_in_between_while_moving():
             result = pipeline.process(rgb, depth, plant.t_s)
             assert result.detected == (frame % 5 == 0)
             assert result.tracked == (frame % 5 != 0)
-            # the candidate says which it was: what the mission's confirmation counts
-            assert [c.detected for c in result.candidates] == [result.detected]
             if result.planes is not None:
                 # the wall 1 m ahead fills the view
                 planes_at.append(frame)

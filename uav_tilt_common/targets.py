@@ -18,10 +18,9 @@ OBJECT_CLASSES = ('bolt_plate', 'gauge', 'hazard_sign')
 NO_TARGET_COV0 = -1.0
 # PointCloud2 fields of target/candidates, all float32: the POI (camera optical frame, m),
 # the unit surface normal towards the camera, the POI's position covariance (m^2, upper
-# triangle), the detector's score, the class index, and 1 when the detector found the box
-# in this frame, 0 when the tracker carried it from an earlier detection.
+# triangle), the detector's score and the class index.
 CANDIDATE_FIELDS = ('x', 'y', 'z', 'nx', 'ny', 'nz', 'cxx', 'cxy', 'cxz', 'cyy', 'cyz', 'czz',
-                    'score', 'class_id', 'detected')
+                    'score', 'class_id')
 _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
@@ -47,13 +46,12 @@ class TargetCandidate:
     cov_cam: np.ndarray         # 3x3 position covariance, m^2
     score: float = 1.0
     class_id: int = 0
-    detected: bool = True       # False: the tracker carried the box from an earlier frame
 
 
 def candidates_to_array(candidates: Iterable[TargetCandidate]) -> NDArray[np.float32]:
     """(N, len(CANDIDATE_FIELDS)) float32 rows of ``candidates``."""
     rows = [np.concatenate([c.p_cam, c.n_cam, [c.cov_cam[i, j] for i, j in _UPPER],
-                            [c.score, c.class_id, float(c.detected)]]) for c in candidates]
+                            [c.score, c.class_id]]) for c in candidates]
     return np.asarray(rows, dtype=np.float32).reshape(-1, len(CANDIDATE_FIELDS))
 
 
@@ -67,5 +65,5 @@ def candidates_from_array(rows: ArrayLike) -> list[TargetCandidate]:
         for (i, j), value in zip(_UPPER, row[6:12]):
             cov[i, j] = cov[j, i] = value
         out.append(TargetCandidate(row[0:3].copy(), row[3:6].copy(), cov, float(row[12]),
-                                   int(round(row[13])), bool(row[14] > 0.5)))
+                                   int(round(row[13]))))
     return out

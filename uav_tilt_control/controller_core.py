@@ -137,7 +137,7 @@ class ControllerCore:
             return False
         self._target_source_up = True
         return self.estimator.add_candidates(
-            stamp_s, [(c.p_cam, c.n_cam, c.cov_cam, c.detected) for c in candidates])
+            stamp_s, [(c.p_cam, c.n_cam, c.cov_cam) for c in candidates])
 
     def on_planes(self, stamp_s, planes):
         """Vision's ``vision/planes`` of one frame (Planes in the camera optical frame):

@@ -68,16 +68,13 @@ class MissionConfig:
     # view of a tall wall) and one more search_descend_m lower (the camera looks level and
     # sees 23 degrees down: a low target on a near wall lies below the image), until a
     # candidate target is seen; it is confirmed once confirm_n of its measurements agree
-    # within confirm_radius_m, confirm_detections of them the detector's, with at most
-    # confirm_max_gap_frames vision frames without it between two of them (vision's
-    # tracker carries a detection over the frames between, so a target is in every frame;
-    # a false detection, tracked over a few frames, comes and goes). One not confirmed
-    # within confirm_timeout_s is looked at again from confirm_range_m (a small far target
-    # is seen in few frames), then dropped, and the sweep goes on. After the three turns,
-    # the search faces the wall vision saw most (vision/planes): from search_face_m in
-    # front of each end of what it saw of it, at the takeoff altitude, it sweeps
-    # search_face_turn_rad across the wall (a target seen far off its normal from the start
-    # is seen nearly head-on there). search_timeout_s in all, then it lands.
+    # within confirm_radius_m. One not confirmed within confirm_timeout_s is looked at
+    # again from confirm_range_m (a small far target is seen in few frames), then dropped,
+    # and the sweep goes on. After the three turns, the search faces the wall vision saw
+    # most (vision/planes): from search_face_m in front of each end of what it saw of it,
+    # at the takeoff altitude, it sweeps search_face_turn_rad across the wall (a target
+    # seen far off its normal from the start is seen nearly head-on there).
+    # search_timeout_s in all, then it lands.
     search_yaw_rate_rad_s: float = param(0.35, lo=0.0, hi=1.0)  # 0: hover and wait
     search_climb_m: float = param(0.8, lo=0.0, hi=10.0)
     search_descend_m: float = param(0.6, lo=0.0, hi=10.0)   # not below 2 land_detect_height_m
@@ -94,8 +91,6 @@ class MissionConfig:
     free_flight_contact_n: float = param(1.0, lo=0.1, hi=50.0)
     free_flight_clearance_m: float = param(0.6, lo=0.05, hi=5.0)
     confirm_n: int = param(5, lo=1, hi=100)
-    confirm_detections: int = param(2, lo=1, hi=100)
-    confirm_max_gap_frames: int = param(1, lo=0, hi=1000)
     confirm_radius_m: float = param(0.15, lo=0.01, hi=2.0)
     confirm_timeout_s: float = param(4.0, lo=0.1, hi=60.0)
     # a candidate seen but not confirmed farther than this is looked at again from here
@@ -207,7 +202,6 @@ class SearchState:
         self.since_s = 0.0
         self.ignore_until_s = -math.inf
         self.agreeing = 0
-        self.detections = 0             # of the agreeing ones, those the detector made
         self.moved_closer = False
         self.position = None
         self._last_stamp_s = None
@@ -217,25 +211,22 @@ class SearchState:
         self.resume_phase = self.phase
         self.phase = 'confirm'
         self.since_s = now_s
-        self.agreeing = self.detections = 0
+        self.agreeing = 0
         self.moved_closer = False
         self.position = np.asarray(target[0], dtype=float).copy()
         self._last_stamp_s = None
 
-    def observe(self, now_s, target, radius_m, max_gap_frames):
+    def observe(self, now_s, target, radius_m):
         """Count a new measurement of the candidate (a newer stamp) that agrees with the one
-        before, and whether the detector made it; one elsewhere, or after more than
-        ``max_gap_frames`` vision frames without it, starts the count again from there."""
-        stamp = now_s - target.age_s
+        before; one elsewhere starts the count again from there."""
+        stamp = now_s - target[2]
         if self._last_stamp_s is not None and stamp <= self._last_stamp_s + 1e-9:
             return
         self._last_stamp_s = stamp
-        if np.linalg.norm(np.asarray(target.p_poi_map) - self.position) > radius_m \
-                or target.gap_frames > max_gap_frames:
-            self.agreeing = self.detections = 0
-        self.position = np.asarray(target.p_poi_map, dtype=float).copy()
+        if np.linalg.norm(np.asarray(target[0]) - self.position) > radius_m:
+            self.agreeing = 0
+        self.position = np.asarray(target[0], dtype=float).copy()
         self.agreeing += 1
-        self.detections += bool(target.detected)
 
 
 class Mission:
@@ -730,10 +721,8 @@ class Mission:
                 search.phase, search.since_s = 'confirm', self._now_s
             return
         if self._target_usable(target):
-            search.observe(self._now_s, target, cfg.confirm_radius_m,
-                           cfg.confirm_max_gap_frames)
-            if search.agreeing >= cfg.confirm_n and \
-                    search.detections >= cfg.confirm_detections:
+            search.observe(self._now_s, target, cfg.confirm_radius_m)
+            if search.agreeing >= cfg.confirm_n:
                 self._enter(Mode.APPROACH, 'target confirmed', target=target)
                 return
         if self._now_s - search.since_s <= cfg.confirm_timeout_s:

@@ -46,16 +46,12 @@ class TargetEstimatorConfig:
 
 
 class TargetEstimate(typing.NamedTuple):
-    """What the mission consumes. Of its newest measurement: ``detected``, a detection,
-    not a box vision's tracker carried from an earlier one; ``gap_frames``, how many vision
-    frames just before it did not see the target."""
+    """What the mission consumes."""
 
     p_poi_map: np.ndarray
     normal_map: np.ndarray
     age_s: float
     valid: bool
-    detected: bool = True
-    gap_frames: int = 0
 
 
 class TargetEstimator:
@@ -71,10 +67,6 @@ class TargetEstimator:
         self._P = None              # position covariance of the estimate, m^2
         self._n_map = None
         self._stamp_s = None        # stamp of the last accepted measurement
-        self._detected = True       # ... whether it was a detection
-        self._gap_frames = 0        # ... and the frames without the target before it
-        self._missed = 0            # frames without the target since then
-        self._fresh = False         # the frame being taken moved the estimate
         self._rejected_run = []     # consecutive gated-out measurements in map
         # Set by the mission: a locked target is never swapped for another object (a look-
         # alike); the first fix is taken near the hint (map) when there is one.
@@ -88,7 +80,6 @@ class TargetEstimator:
         """Forget the target estimate (a candidate the mission did not confirm)."""
         self._p_map = self._P = self._n_map = self._stamp_s = None
         self._rejected_run = []
-        self._missed = 0
 
     def aim(self, hint_map):
         """Look for the target near ``hint_map`` (map; None: wherever vision sees one): the
@@ -129,8 +120,7 @@ class TargetEstimator:
         u = (t_s - t0) / (t1 - t0)
         return Pose(quat_to_matrix(quat_slerp(q0, q1, u)), p0 + u * (p1 - p0))
 
-    def add_measurement(self, stamp_s, p_cam, n_cam_or_R_cam_t, covariance=None,
-                        detected=True):
+    def add_measurement(self, stamp_s, p_cam, n_cam_or_R_cam_t, covariance=None):
         """Add a vision measurement in the camera optical frame, stamped with the image time.
 
         ``n_cam_or_R_cam_t`` is the surface normal (3,) or the target orientation (3x3,
@@ -144,28 +134,20 @@ class TargetEstimator:
         n_cam = np.asarray(n_cam_or_R_cam_t, dtype=float)
         if n_cam.shape == (3, 3):
             n_cam = n_cam[:, 2]
-        return self.add_candidates(stamp_s, [(p_cam, n_cam, covariance, detected)])
+        return self.add_candidates(stamp_s, [(p_cam, n_cam, covariance)])
 
     def add_candidates(self, stamp_s, candidates):
-        """All target candidates of one frame, ``(p_cam, n_cam, covariance or None,
-        detected)`` each in the camera optical frame, vision's tracked one first; returns
-        True when one was accepted.
+        """All target candidates of one frame, ``(p_cam, n_cam, covariance or None)`` each
+        in the camera optical frame, vision's tracked one first; returns True when one was
+        accepted.
 
         The one nearest the estimate is taken; before the first fix, the one nearest the
-        hint within ``hint_radius_m``, or without a hint vision's first. A frame that does
-        not move the estimate is one without the target (``gap_frames``).
+        hint within ``hint_radius_m``, or without a hint vision's first.
         """
-        self._fresh = False
-        accepted = self._take_candidates(stamp_s, candidates)
-        if not self._fresh:
-            self._missed += 1
-        return accepted
-
-    def _take_candidates(self, stamp_s, candidates):
         if not candidates:
             self.counters['no_target'] += 1
             return False
-        checked = [c for c in candidates if self._finite(stamp_s, *c[:3])]
+        checked = [c for c in candidates if self._finite(stamp_s, *c)]
         if not checked:
             self.counters['rejected_nonfinite'] += 1
             return False
@@ -183,11 +165,10 @@ class TargetEstimator:
                     > self.config.hint_radius_m:
                 self.counters['rejected_hint'] += 1
                 return False
-        _, n_cam, cov, detected = checked[k]
+        _, n_cam, cov = checked[k]
         n_map = frames.unit(map_cam.rotate(n_cam))
         cov = None if cov is None else np.asarray(cov, dtype=float).ravel()
-        return self._update(stamp_s, in_map[k], n_map, self._meas_cov_map(cov, map_cam.R),
-                            bool(detected))
+        return self._update(stamp_s, in_map[k], n_map, self._meas_cov_map(cov, map_cam.R))
 
     @staticmethod
     def _finite(stamp_s, p_cam, n_cam, cov):
@@ -209,13 +190,12 @@ class TargetEstimator:
                 and math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) > 1e-9):
             self.counters['rejected_nonfinite'] += 1
             return False
-        self._reset(stamp_s, p_map, frames.unit(n_map), np.zeros((3, 3)), True)
+        self._reset(stamp_s, p_map, frames.unit(n_map), np.zeros((3, 3)))
         self.counters['accepted'] += 1
         return True
 
     def estimate(self, now_s=None):
-        """TargetEstimate(p_poi_map, normal_map, age_s, valid, detected, gap_frames) or None
-        before the first fix.
+        """TargetEstimate(p_poi_map, normal_map, age_s, valid) or None before the first fix.
 
         ``age_s`` is measured from the last accepted stamp to ``now_s`` (default: the newest
         vehicle state); valid means younger than ``valid_age_s``.
@@ -226,8 +206,7 @@ class TargetEstimator:
             now_s = self._history[-1][0] if self._history else self._stamp_s
         age_s = max(0.0, now_s - self._stamp_s)
         return TargetEstimate(self._p_map.copy(), self._n_map.copy(), age_s,
-                              age_s <= self.config.valid_age_s, self._detected,
-                              self._gap_frames)
+                              age_s <= self.config.valid_age_s)
 
     def time_since_last_s(self, now_s):
         """Seconds since the last accepted measurement (inf before the first)."""
@@ -247,10 +226,10 @@ class TargetEstimator:
         floor = np.eye(3) * self.config.meas_std_m ** 2
         return R_map_cam @ cov_cam @ R_map_cam.T + floor
 
-    def _update(self, stamp_s, p_map, n_map, R_meas, detected):
+    def _update(self, stamp_s, p_map, n_map, R_meas):
         cfg = self.config
         if self._p_map is None:
-            self._reset(stamp_s, p_map, n_map, R_meas, detected)
+            self._reset(stamp_s, p_map, n_map, R_meas)
             self.counters['accepted'] += 1
             return True
         dt = max(0.0, stamp_s - self._stamp_s)
@@ -261,7 +240,7 @@ class TargetEstimator:
         if (np.linalg.norm(r) > cfg.gate_distance_m or r @ np.linalg.solve(S, r) > cfg.gate_chi2
                 or angle > cfg.gate_angle_rad):
             self.counters['rejected_gate'] += 1
-            self._maybe_reacquire(stamp_s, p_map, n_map, R_meas, detected)
+            self._maybe_reacquire(stamp_s, p_map, n_map, R_meas)
             return False
         self._rejected_run = []
         K = P @ np.linalg.inv(S)
@@ -270,11 +249,10 @@ class TargetEstimator:
         w = 1.0 if cfg.normal_tau_s == 0.0 else 1.0 - np.exp(-dt / cfg.normal_tau_s)
         self._n_map = frames.unit(self._n_map + w * (n_map - self._n_map))
         self._stamp_s = max(self._stamp_s, stamp_s)
-        self._measured(detected)
         self.counters['accepted'] += 1
         return True
 
-    def _maybe_reacquire(self, stamp_s, p_map, n_map, R_meas, detected):
+    def _maybe_reacquire(self, stamp_s, p_map, n_map, R_meas):
         # a run of rejected measurements that agree with each other means the estimate is
         # the outlier (wrong first lock, or the target moved): restart from them
         run = self._rejected_run
@@ -290,17 +268,11 @@ class TargetEstimator:
                 self.counters['switch_refused'] += 1
                 run.clear()
                 return
-            self._reset(stamp_s, p_map, n_map, R_meas, detected)
+            self._reset(stamp_s, p_map, n_map, R_meas)
             self.counters['reacquired'] += 1
 
-    def _measured(self, detected):
-        """The estimate took a measurement: what made it, the frames missed before it."""
-        self._detected, self._gap_frames = detected, self._missed
-        self._missed, self._fresh = 0, True
-
-    def _reset(self, stamp_s, p_map, n_map, P, detected):
+    def _reset(self, stamp_s, p_map, n_map, P):
         self._p_map = np.array(p_map, dtype=float)
-        self._measured(detected)
         self._n_map = np.array(n_map, dtype=float)
         self._P = np.array(P, dtype=float)
         self._stamp_s = float(stamp_s)

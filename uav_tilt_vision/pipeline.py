@@ -129,7 +129,7 @@ class VisionPipeline:
                 continue
             p_cam, n_cam, cov = est
             res.candidates.append(TargetCandidate(p_cam, n_cam, cov[:3, :3], float(score),
-                                                  self.target_class, not res.tracked))
+                                                  self.target_class))
             if k == 0:
                 res.p_cam, res.covariance = p_cam, cov
                 res.q_cam = pose_quaternion_from_normal(n_cam)
