@@ -318,6 +318,24 @@ def test_no_contact_retreats():
     assert flight.mission.status['failsafe_reason'] == 'no_contact'
 
 
+def test_a_candidate_is_confirmed_by_agreeing_measurements_and_one_elsewhere_restarts():
+    cfg = MissionConfig()
+    flight = Flight(cfg)
+    assert flight.mission.inspect()[0]
+    flight.run_to(Mode.SEARCH, target=None, timeout_s=30.0)
+    elsewhere = PERFECT._replace(p_poi_map=P_POI + [0.0, 2.0 * cfg.confirm_radius_m, 0.0])
+    # each tick a new measurement (a newer stamp); the one elsewhere breaks the run
+    for k in range(cfg.confirm_n - 1):
+        flight.step(target=PERFECT)
+    flight.step(target=elsewhere)
+    flight.step(target=PERFECT)
+    for k in range(cfg.confirm_n - 2):
+        flight.step(target=PERFECT)
+        assert flight.mission.mode == Mode.SEARCH, k
+    flight.step(target=PERFECT)
+    assert flight.mission.mode == Mode.APPROACH
+
+
 def test_search_timeout_lands():
     cfg = MissionConfig(search_timeout_s=2.0, search_yaw_rate_rad_s=0.2)
     flight = _in_mode(Mode.SEARCH, cfg)
