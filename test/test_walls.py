@@ -31,14 +31,17 @@ def test_the_parts_of_one_wall_make_one_wall_and_the_ground_none(draw):
     assert not memory.observe([1.0, 2.0, 0.0], [0.0, 0.0, 1.0], 0.3)       # the ground
     assert not memory.observe([1.0, 2.0, 3.0], [0.1, 0.0, -0.99], 0.3)     # a ceiling
     seen = rng.uniform(-3.0, 3.0, 12)
-    for s in seen:
+    shares = rng.uniform(0.1, 0.8, seen.size)
+    for s, share in zip(seen, shares):
         # the centroid of what a frame saw of it, 1 degree of normal noise
         tilt = frames.unit(n + rng.normal(0.0, math.radians(1.0), 3))
-        assert memory.observe(point + along * s + up * rng.uniform(-0.5, 0.5), tilt,
-                              rng.uniform(0.1, 0.8))
+        assert memory.observe(point + along * s + up * rng.uniform(-0.5, 0.5), tilt, share)
     assert len(memory.walls) == 1
     wall = memory.best()
-    assert math.degrees(math.acos(min(wall.normal_map @ n, 1.0))) < 1.0
+    # the share-weighted mean of the normals: 1 degree per axis across the normal, shrunk
+    # by the weights; its angle off the normal is Rayleigh, over 5 sigma once in 270,000
+    sigma_deg = 1.0 * np.sqrt(np.sum(shares ** 2)) / np.sum(shares)
+    assert math.degrees(math.acos(min(wall.normal_map @ n, 1.0))) < 5.0 * sigma_deg
     assert abs((wall.point_map - point) @ n) < 0.02
     # the extent reaches both ends of what was seen, along the wall
     lo, hi = wall.along_m
