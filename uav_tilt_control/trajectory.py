@@ -21,8 +21,8 @@ MIN_JERK_PEAK = 1.875
 # A MinJerk segment that starts moving brings that start velocity v0 to rest over
 # T_b = v0 * BRAKE_PEAK / BRAKE_ACCEL_M_S2 (at least MIN_SEGMENT_S, at most the segment):
 # spread over the whole of a long segment, as a single quintic does, it would carry the
-# reference BRAKE_REACH * v0 * T away from the line between the ends (a metre below the
-# ground for a 0.3 m/s descent turned into a 17 s approach). The brake's share of the
+# reference BRAKE_REACH * v0 * T away from the line between the ends (a metre below it,
+# into the ground, for a 0.3 m/s descent turned into a 17 s approach). The brake's share of the
 # quintic, h(tau) = tau - 6 tau^3 + 8 tau^4 - 3 tau^5, peaks at BRAKE_REACH in position
 # and BRAKE_PEAK in acceleration (per v0 T_b and v0 / T_b).
 BRAKE_ACCEL_M_S2 = 1.0
