@@ -52,6 +52,9 @@ def recordings(tmp_path_factory):
         killed = start('uav_tilt_tools.recorder_node', log_path=tmp / 'killed.log',
                        params={'output': str(tmp / 'killed.mcap'), 'exclude': CAMERA,
                                'flush_period_s': 0.5})
+        # the recording window starts once both recorders subscribe (their start-up, a few
+        # seconds on a loaded machine, would otherwise eat into it)
+        assert probe.spin_until(lambda: probe.node.count_subscribers(names.CLOCK) >= 2, 60.0)
         time.sleep(RECORD_WALL_S)
         killed.kill()
         code, _ = stop(recorder, timeout_s=20.0)
