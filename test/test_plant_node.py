@@ -8,7 +8,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
 
 from ros_graph import start, stop
 from uav_tilt_common import names, ros_msgs, ros_qos
@@ -31,7 +31,8 @@ def test_lockstep_driver_timeout_bad_commands_and_clean_shutdown(tmp_path, probe
                    '--out', str(report), log_path=tmp_path / 'driver.log')
     try:
         probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
-        assert probe.spin_until(report.exists, 60.0), (tmp_path / 'plant.log').read_text()
+        assert probe.spin_until(report.exists, 60.0), \
+            (tmp_path / 'plant.log').read_text() + (tmp_path / 'driver.log').read_text()
         result = json.loads(report.read_text())
         assert result['ticks'] == 300
         # The plant publishes odom and wrench before the imu of a tick; DDS does not order
@@ -75,6 +76,30 @@ def test_lockstep_driver_timeout_bad_commands_and_clean_shutdown(tmp_path, probe
         code, seconds = stop(plant)
     assert code == 0, (tmp_path / 'plant.log').read_text()
     assert seconds < 5.0
+
+
+def test_driver_answers_a_re_sent_tick_again(tmp_path, probe):
+    """The plant re-sends its first tick until a command arrives; an answer that went out
+    before the plant's subscription matched is lost, so the re-sent tick needs it again."""
+    driver = start('uav_tilt_tools.hover_driver', '--ticks', '2', '--out',
+                   str(tmp_path / 'driver.json'), log_path=tmp_path / 'driver.log')
+    try:
+        imu = probe.node.create_publisher(Imu, names.IMU, ros_qos.CONTROL)
+        assert probe.spin_until(lambda: imu.get_subscription_count() > 0, 30.0)
+        tick = ros_msgs.imu_msg(np.zeros(3), np.array([0.0, 0.0, 9.81]), [0.0, 0.0, 0.0, 1.0],
+                                ros_msgs.to_stamp(1.0))
+        imu.publish(tick)
+        time.sleep(0.5)     # answered, with no one subscribed to hear it
+        probe.record(names.ACTUATORS_CMD, JointState, ros_qos.CONTROL)
+        cmd = probe.messages[names.ACTUATORS_CMD]
+        deadline = time.monotonic() + 20.0
+        while not cmd and time.monotonic() < deadline:
+            imu.publish(tick)   # re-sent, as the plant does until a command arrives
+            probe.spin_until(lambda: cmd, 0.25)
+        assert cmd, (tmp_path / 'driver.log').read_text()
+        assert {ros_msgs.stamp_ns(m.header.stamp) for m in cmd} == {10**9}
+    finally:
+        stop(driver)
 
 
 def test_bad_parameter_stops_the_node_with_one_clear_line(tmp_path):

@@ -45,6 +45,7 @@ class HoverDriver(Node):
         self.wall_first = None
         self.wall_last = None
         self.z_ref_m = None         # the height held: the first odom's
+        self.last_cmd = None        # the answer to the last tick, re-sent if it is re-sent
 
     def _remember(self, topic):
         def callback(msg):
@@ -67,7 +68,10 @@ class HoverDriver(Node):
             return
         stamp = ros_msgs.stamp_ns(msg.header.stamp)
         if self.answered and stamp == self.answered[-1]:
-            return      # the plant re-sent a tick it is still waiting on
+            # the plant re-sent a tick it is still waiting on (our answer went out before
+            # its subscription matched ours): answer it again
+            self.pub.publish(self.last_cmd)
+            return
         if all(t in self.latest and ros_msgs.stamp_ns(self.latest[t].header.stamp) == stamp
                for t in self.latest_topics):
             self.complete_sets += 1
@@ -75,8 +79,9 @@ class HoverDriver(Node):
         now = time.monotonic()
         self.wall_first = self.wall_first or now
         self.wall_last = now
-        self.pub.publish(ros_msgs.actuator_msg(np.full(4, self.thrust_per_rotor_n()), (0.0, 0.0),
-                                               msg.header.stamp))
+        self.last_cmd = ros_msgs.actuator_msg(np.full(4, self.thrust_per_rotor_n()), (0.0, 0.0),
+                                              msg.header.stamp)
+        self.pub.publish(self.last_cmd)
 
     def report(self):
         """Counts, stamp ordering and the achieved real-time factor."""
