@@ -86,13 +86,17 @@ def test_every_topic_recorded_with_its_type_and_rate(recordings):
         assert types[topic] == (type_name, 'ros2msg', 'cdr')
     # Every message up to the last one decodes, and the statistics count them all.
     assert sum(map(len, messages.values())) == summary.statistics.message_count
-    clock = [ns for ns, _, _ in messages['/clock']]
-    span_s = (clock[-1] - clock[0]) * 1e-9
-    assert span_s > 1.0
-    for topic, rate in RELIABLE_HZ.items():
-        assert len(messages[topic]) == pytest.approx(rate * span_s, rel=0.1), topic
-    for topic, rate in BEST_EFFORT_HZ.items():
-        assert 0.5 * rate * span_s < len(messages[topic]) < 1.1 * rate * span_s + 1, topic
+    # Each topic against its own span of stamps: the recorder subscribes topic by topic as
+    # it discovers them, so on a loaded machine one may start a second of wall time (a
+    # quarter second of sim time) before another.
+    for topic, rate in {**RELIABLE_HZ, **BEST_EFFORT_HZ}.items():
+        stamps = [ns for ns, _, _ in messages[topic]]
+        span_s = (stamps[-1] - stamps[0]) * 1e-9
+        assert span_s > 1.0, topic
+        if topic in RELIABLE_HZ:
+            assert len(stamps) == pytest.approx(rate * span_s + 1, rel=0.1), topic
+        else:
+            assert 0.5 * rate * span_s < len(stamps) < 1.1 * rate * span_s + 1, topic
     assert len(messages['/uav/ground_truth/target']) == 1    # latched, sent before we came
 
 
