@@ -488,6 +488,67 @@ def test_hover_backs_off_what_the_tool_touches_and_holds_there():
     assert flight.mission.set_hover_setpoint([0.0, 0.0, 2.0], 0.0)[0]
 
 
+def _held(flight):
+    """Something holds the vehicle where it is (the ground, a wall it rests on): it follows
+    no setpoint until ``del flight._track``."""
+    flight.v = np.zeros(3)
+    flight._track = lambda sp: None
+
+
+def _deadline_s(flight):
+    segment = flight.mission._traj
+    return segment.t0_s + segment.T + flight.config.arrive_timeout_s
+
+
+def _in_mode_held(mode, cfg):
+    """A flight in ``mode`` (RETREAT: an abort in HOLD), held half a second in."""
+    flight = _in_mode(Mode.HOLD if mode == Mode.RETREAT else mode, cfg)
+    if mode == Mode.RETREAT:
+        assert flight.mission.abort()[0]
+    flight.run_for(0.5)
+    assert flight.mission.mode == mode
+    _held(flight)
+    return flight
+
+
+@pytest.mark.parametrize('mode', [Mode.APPROACH, Mode.RETREAT])
+def test_a_segment_the_vehicle_cannot_reach_lands(mode):
+    cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
+    flight = _in_mode_held(mode, cfg)
+    deadline_s = _deadline_s(flight)
+    flight.run_until(lambda f: f.mission.mode != mode, deadline_s - flight.t_s + 1.0)
+    assert flight.mission.mode == Mode.LAND
+    assert flight.t_s == pytest.approx(deadline_s, abs=2 * DT_S)
+    del flight._track
+    flight.run_to(Mode.IDLE, timeout_s=30.0)
+    status = flight.mission.status
+    assert status['failsafe_reason'] == 'unreachable' and not status['success']
+
+
+@pytest.mark.parametrize('mode', [Mode.APPROACH, Mode.RETREAT])
+def test_an_arrival_late_but_within_the_timeout_goes_on(mode):
+    cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
+    flight = _in_mode_held(mode, cfg)
+    flight.run_until(lambda f: f.t_s > _deadline_s(f) - 0.1, 60.0)
+    del flight._track
+    flight.run_to(Mode.CONTACT if mode == Mode.APPROACH else Mode.HOVER, timeout_s=0.1)
+    assert flight.mission.status['failsafe_reason'] == ''
+
+
+def test_a_back_off_that_is_held_goes_on_from_where_it_got_to():
+    cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
+    flight = _hovering(cfg)
+    flight.step(target=None, f_map=np.array([0.0, -1.5, 0.0]))
+    assert flight.mission.phase == 'clear'
+    _held(flight)
+    deadline_s = _deadline_s(flight)
+    flight.run_until(lambda f: f.mission.phase == '', deadline_s - flight.t_s + 1.0,
+                     target=None)
+    assert flight.t_s == pytest.approx(deadline_s, abs=2 * DT_S)
+    assert flight.mission.mode == Mode.HOVER
+    assert flight.mission.status['failsafe_reason'] == ''
+
+
 @pytest.mark.parametrize('takeoff_m, low_m', [(1.5, 0.9), (0.8, 0.6)])
 def test_search_turns_at_the_takeoff_altitude_higher_and_lower_then_lands(takeoff_m, low_m):
     cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0,

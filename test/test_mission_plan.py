@@ -248,6 +248,22 @@ def test_a_transit_that_meets_a_wall_backs_off_and_searches_from_there():
     assert flight.mission.status['task_outcomes'] == 'ok,ok,ok'
 
 
+def test_a_transit_held_on_its_way_lands_and_ends_the_plan():
+    cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
+    flight = PlanFlight(_plan(), cfg)
+    assert flight.mission.inspect()[0]
+    flight.run_until(lambda f: f.mission.phase == 'transit' and f.mission.task.target == 'b')
+    flight._track = lambda sp: None       # something holds the vehicle where it is
+    segment = flight.mission._traj
+    flight.run_until(lambda f: f.mission.mode != Mode.HOVER, segment.T + cfg.arrive_timeout_s)
+    assert flight.mission.mode == Mode.LAND
+    assert flight.t_s == pytest.approx(segment.t0_s + segment.T + cfg.arrive_timeout_s,
+                                       abs=2 * DT_S)
+    del flight._track
+    flight.run_until(lambda f: f.mission.mode == Mode.IDLE, 30.0)
+    assert [r.reason for r in flight.mission.records] == ['', 'unreachable', 'not_run']
+
+
 def test_every_mode_has_its_entry_and_tick_in_the_table():
     assert set(MODES) == set(Mode)
     assert all(callable(h.tick) and (h.enter is None or callable(h.enter))

@@ -90,6 +90,11 @@ class MissionConfig:
     # the turn, the descent; a transit to the next task searches from there.
     free_flight_contact_n: float = param(1.0, lo=0.1, hi=50.0)
     free_flight_clearance_m: float = param(0.6, lo=0.05, hi=5.0)
+    # A free-flight segment the vehicle has not arrived at this long after the segment's
+    # own time has met something that holds it (the ground, a wall it rests on): APPROACH,
+    # RETREAT and HOVER's transit land (failsafe 'unreachable'); a back-off ('clear') goes
+    # on from where it got to.
+    arrive_timeout_s: float = param(15.0, lo=1.0, hi=600.0)
     confirm_n: int = param(5, lo=1, hi=100)
     confirm_radius_m: float = param(0.15, lo=0.01, hi=2.0)
     confirm_timeout_s: float = param(4.0, lo=0.1, hi=60.0)
@@ -606,7 +611,7 @@ class Mission:
                 return push
             self._flight_phase = 'clear'
             self._back_off(away)
-        elif self._flight_phase == 'clear' and self._arrived():
+        elif self._flight_phase == 'clear' and (self._arrived() or self._overdue()):
             self._flight_phase = ''
             p = self._ref_map()[0]
             self._plan(np.array([p[0], p[1], z_goal_m]), speed_m_s)
@@ -625,7 +630,7 @@ class Mission:
             self._flight_phase = 'clear'
             self._back_off(push)
         elif self._flight_phase == 'clear':
-            if self._arrived():
+            if self._arrived() or self._overdue():
                 self._flight_phase = ''
                 if self._plan_running():
                     # in HOVER a task runs only in transit to its target: look from here
@@ -635,6 +640,8 @@ class Mission:
             if self._arrived() and abs(yaw_err) < cfg.arrive_yaw_tol_rad:
                 self._flight_phase = ''
                 self._enter(Mode.SEARCH)
+            elif self._overdue():
+                self._failsafe('unreachable', Mode.LAND)
         elif self._inspect_pending and self._time_in_mode() >= cfg.hover_settle_s:
             self._inspect_pending = False
             self._start_task(0)
@@ -656,7 +663,7 @@ class Mission:
             search.phase = 'clear'
             self._back_off(push)
         elif search.phase == 'clear':
-            if self._arrived():
+            if self._arrived() or self._overdue():
                 search.phase = 'sweep'
         elif search.phase in ('confirm', 'closer'):
             self._tick_confirm(target)
@@ -755,9 +762,11 @@ class Mission:
         # standoff and facing it, still does not see it.
         self._track_target(target)
         yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
-        if self._arrived() and abs(yaw_err) < self.config.arrive_yaw_tol_rad \
-                and not self._check_target_lost():
-            self._enter(Mode.CONTACT)
+        if self._arrived() and abs(yaw_err) < self.config.arrive_yaw_tol_rad:
+            if not self._check_target_lost():
+                self._enter(Mode.CONTACT)
+        elif self._overdue():
+            self._failsafe('unreachable', Mode.LAND)
 
     def _enter_contact(self, previous, target):
         cfg = self.config
@@ -943,6 +952,8 @@ class Mission:
                 self._start_task(self._task_index + 1)
             else:
                 self._enter(self._after_retreat)
+        elif self._overdue():
+            self._failsafe('unreachable', Mode.LAND)
 
     def _enter_land(self, previous, target):
         cfg = self.config
@@ -1036,6 +1047,11 @@ class Mission:
         self._yaw_goal = self._yaw_ref
         self._event(f'touched something ({np.linalg.norm(self._f_contact_map):.1f} N): '
                     'backing off')
+
+    def _overdue(self):
+        """Whether the segment under way ended arrive_timeout_s ago (for a mode still
+        waiting to arrive: something holds the vehicle)."""
+        return self._now_s > self._traj.t0_s + self._traj.T + self.config.arrive_timeout_s
 
     def _time_in_mode(self):
         return self._now_s - self._t_mode_s
