@@ -1,5 +1,8 @@
 """FlightCore closed loop on an in-test 6-DoF rigid body (a stand-in for the PyBullet plant)."""
+import dataclasses
+
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import from_dict
@@ -180,3 +183,23 @@ def test_non_finite_inputs_give_a_safe_command():
         command, diagnostics = core.step(good, ImpedanceSetpoint(), bad_contact, bad_dt)
         assert diagnostics['input_fault']
         assert np.all(np.isfinite(command.as_array()))
+
+
+def test_leaving_the_ground_hands_the_learnt_weight_to_the_observer():
+    # what the hover-thrust estimator learnt on the climb starts the observer's vertical
+    # estimate: the thrust does not step, and the error is not counted twice
+    body = RigidBody((0.0, 0.0, 1.0))
+    core = FlightCore(VEHICLE)
+    climbing = ImpedanceSetpoint(lambda_d_t=body.p.copy(), airborne=False)
+    specific = np.array([0.0, 0.0, GRAVITY])
+    core.step(body.state(), climbing, np.zeros(3), CONTROL_DT_S, specific)
+    learnt_n = float(np.random.default_rng().uniform(-3.0, 3.0))
+    core.impedance.f_hover_n = learnt_n
+    before = core.step(body.state(), climbing, np.zeros(3), CONTROL_DT_S, specific)[0]
+    airborne = dataclasses.replace(climbing, airborne=True)
+    after = core.step(body.state(), airborne, np.zeros(3), CONTROL_DT_S, specific)[0]
+    assert core.impedance.f_hover_n == 0.0
+    # one tick of the observer's filter (0.15 s) moves it by 2% of what it now sees
+    assert core.disturbance.f_ext_map[2] == pytest.approx(-learnt_n, abs=0.03 * abs(learnt_n))
+    assert after.thrusts_n.sum() == pytest.approx(before.thrusts_n.sum(),
+                                                  abs=0.03 * abs(learnt_n))

@@ -12,8 +12,9 @@ so the vehicle holds its reference against wind while the contact force, measure
 not in F_ext, still meets the compliance of eq. (6) (the push stays K_z times the depth).
 
 On the ground (and while leaving or meeting it) the ground's reaction is a force nobody
-measures either: there the vertical axis is off and the hover-thrust estimator alone
-learns the weight.
+measures either: there the vertical estimate stops learning and holds what it had (in the
+air it carries the weight error too; dropping it would start a landing with a climb or a
+dip of up to the error over K_z), and the hover-thrust estimator learns the rest.
 """
 import dataclasses
 import math
@@ -42,8 +43,12 @@ class DisturbanceObserver:
         self.mass_kg = float(mass_kg)
         self.thrust_tau_s = float(thrust_tau_s)
         self._axes = np.asarray(self.config.axes, dtype=float)
-        self._axes_on_ground = self._axes * [1.0, 1.0, 0.0]
         self.reset()
+
+    @property
+    def vertical_active(self):
+        """Whether the vertical axis is estimated at all."""
+        return self.config.tau_s > 0.0 and self._axes[2] > 0.0
 
     def reset(self):
         """Forget the estimate and the thrust model's state."""
@@ -59,8 +64,8 @@ class DisturbanceObserver:
         """One tick: the IMU's specific force (body) and the measured contact force (map),
         both over the tick since the last command. Returns the filtered F_ext (map).
 
-        ``airborne`` False: the ground may carry the vehicle, so the vertical estimate
-        fades out (with the filter's time constant) instead of learning its reaction."""
+        ``airborne`` False: the ground may carry the vehicle, so the vertical estimate is
+        held instead of learning its reaction."""
         tau = self.config.tau_s
         if tau <= 0.0 or self._f_cmd_map is None:
             return self.f_ext_map
@@ -70,8 +75,9 @@ class DisturbanceObserver:
         lag = 1.0 if self.thrust_tau_s <= 0.0 else 1.0 - math.exp(-dt_s / self.thrust_tau_s)
         self._f_thrust_map = self._f_thrust_map + lag * (self._f_cmd_map - self._f_thrust_map)
         measured = self.mass_kg * (np.asarray(R_map_base) @ np.asarray(specific_force_base))
-        axes = self._axes if airborne else self._axes_on_ground
-        residual = (measured - self._f_thrust_map - np.asarray(f_contact_map)) * axes
+        residual = (measured - self._f_thrust_map - np.asarray(f_contact_map)) * self._axes
+        if not airborne:
+            residual[2] = self.f_ext_map[2]
         self.f_ext_map = self.f_ext_map + (1.0 - math.exp(-dt_s / tau)) * (
             residual - self.f_ext_map)
         norm = math.sqrt(self.f_ext_map @ self.f_ext_map)

@@ -44,12 +44,14 @@ class FlightCore:
         self.attitude = AttitudePid(vehicle.inertia_kgm2, self.config.attitude)
         self.allocator = Allocator(vehicle, self.config.allocation)
         self._tip_flu = np.array([vehicle.tool_tip_x_m, 0.0, 0.0])
+        self._airborne = False
 
     def reset(self):
         """Clear filter and integrator state (e.g. on arming)."""
         self.impedance.reset()
         self.disturbance.reset()
         self.attitude.reset()
+        self._airborne = False
 
     def safe_command(self):
         """Hover thrust at zero tilt: what is sent when the inputs cannot be trusted."""
@@ -66,6 +68,9 @@ class FlightCore:
             return self.safe_command(), {'input_fault': True, 'saturated': False}
 
         R_map_base = frames.quat_matrix(state.q_map_base)
+        if setpoint.airborne and not self._airborne:
+            self._hand_weight_to_observer()
+        self._airborne = setpoint.airborne
         if specific_force_base is not None and np.all(np.isfinite(specific_force_base)):
             self.disturbance.update(R_map_base, specific_force_base, f_contact_map, dt_s,
                                     setpoint.airborne)
@@ -101,6 +106,15 @@ class FlightCore:
             'torque_given_up_nm': result.torque_given_up_nm,
         }
         return command, diagnostics
+
+    def _hand_weight_to_observer(self):
+        """Leaving the ground: the observer's vertical axis starts learning, and it learns a
+        weight error too (the IMU scales the thrust by the true mass), so what the hover-thrust
+        estimator learnt of it on the climb becomes the observer's starting estimate instead
+        of being counted twice (that climbed the vehicle by the error over K_z)."""
+        if self.disturbance.vertical_active:
+            self.disturbance.f_ext_map[2] -= self.impedance.f_hover_n
+            self.impedance.f_hover_n = 0.0
 
 
 def _inputs_finite(state, setpoint, f_contact_map, dt_s):
