@@ -170,6 +170,112 @@ def test_stale_odometry_descends_and_lands():
         flight.close()
 
 
+def _mass_error_scenario():
+    """SCENARIO with a fresh mass error of 8-15%, heavier or lighter."""
+    rng = np.random.default_rng()
+    scale = 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(0.08, 0.15)
+    return dataclasses.replace(SCENARIO, mismatch=dataclasses.replace(
+        SCENARIO.mismatch, mass_scale=float(scale)))
+
+
+def test_a_mass_error_learnt_on_the_climb_is_not_counted_twice_in_hover():
+    # The hover-thrust estimator learns the error on the climb; once airborne the
+    # disturbance observer learns it as well (the IMU scales the thrust by the true mass).
+    # Counted twice, the vehicle climbs or sinks by the error over K_z (0.13-0.24 m here).
+    scenario = _mass_error_scenario()
+    config = _config()
+    flight = Flight(scenario, config)
+    try:
+        flight.step()
+        assert flight.core.takeoff()[0]
+        assert flight.run(15.0, until=lambda f: f.core.mission.mode == Mode.HOVER)
+        t0 = flight.t_s
+        flight.run(5.0)
+        _, p = _series(flight, 'p_map', t0)
+        # HOVER starts on arrival, within arrive_tol_m, and stays there
+        assert np.abs(p[:, 2] - ALTITUDE_M).max() < config.mission.arrive_tol_m, (
+            scenario.mismatch.mass_scale)
+    finally:
+        flight.close()
+
+
+def test_a_landing_tracks_its_descent_with_a_mass_error():
+    # In the air the disturbance observer carries the weight error; landing, its vertical
+    # axis stops learning. Dropping what it had would step the thrust by the error and move
+    # the vehicle off its descent by about the error over K_z (0.13-0.24 m here).
+    scenario = _mass_error_scenario()
+    config = _config()
+    setpoints = []
+    flight = _hovering(config, scenario)
+    try:
+        # settled first (after the climb, a mass error takes seconds to settle out)
+        assert flight.run(20.0, until=lambda f: abs(f.plant.state().p_map[2] - ALTITUDE_M)
+                          < 0.01)
+        flight.core.setpoint_hook = lambda sp: setpoints.append(sp) or sp
+        assert flight.core.land()[0]
+        z_air_m = config.mission.ground_z_m + 2.0 * config.mission.land_detect_height_m
+        assert flight.run(20.0, until=lambda f: f.plant.state().p_map[2] < z_air_m)
+        t0 = flight.log[-len(setpoints)]['t_s']
+        _, p = _series(flight, 'p_map', t0)
+        z_sp = [(sp.origin_map + sp.R_map_t @ sp.lambda_d_t)[2] for sp in setpoints]
+        n = min(len(p), len(z_sp))
+        assert np.abs(p[:n, 2] - z_sp[:n]).max() < 0.05, scenario.mismatch.mass_scale
+    finally:
+        flight.close()
+
+
+def test_a_landing_on_ground_higher_than_ground_z_lands_there():
+    # ground_z_m a fresh 0.4-1.5 m below the real ground (as odometry drifting up, or a
+    # roof, would make it): the descent stops on the ground and the rotors stop there
+    below_m = float(np.random.default_rng().uniform(0.4, 1.5))
+    cfg = _config(ground_z_m=-below_m)
+    flight = _hovering(cfg)
+    try:
+        z_ground = flight.log[0]['p_map'][2]
+        t0 = flight.t_s
+        assert flight.core.land()[0]
+        mission = cfg.mission
+        descent_s = 1.875 * (ALTITUDE_M - z_ground) / mission.descent_rate_m_s
+        # landed once the setpoint is land_detect_height_m below it, land_detect_s later
+        held_s = 1.875 * (ALTITUDE_M - z_ground + mission.land_detect_height_m) / (
+            mission.descent_rate_m_s)
+        assert flight.run(held_s + mission.land_detect_s + 1.0,
+                          until=lambda f: f.core.mission.mode == Mode.IDLE)
+        assert flight.t_s - t0 > descent_s
+        landed, height_m, above = flight.core.mission.events[-1]['reason'].split(' ', 2)
+        assert (landed, above) == ('landed', 'm above ground_z_m')
+        assert float(height_m) == pytest.approx(z_ground + below_m, abs=0.02)
+        assert flight.status['failsafe_reason'] == ''
+        assert np.all(flight.log[-1]['command'].thrusts_n == 0.0)
+        flight.run(1.0)
+        assert flight.plant.state().p_map[2] == pytest.approx(z_ground, abs=0.02)
+    finally:
+        flight.close()
+
+
+def test_a_rotor_lost_in_flight_flips_the_vehicle_and_the_rotors_stop():
+    flight = _hovering()
+    try:
+        mission = flight.core.config.mission
+        dead = int(np.random.default_rng().integers(4))
+        step = flight.plant.step
+        flight.plant.step = lambda command: step(dataclasses.replace(
+            command, thrusts_n=np.where(np.arange(4) == dead, 0.0, command.thrusts_n)))
+        upset = lambda f: Rotation.from_quat(    # noqa: E731
+            f.plant.state().q_map_base).as_matrix()[2, 2] < np.cos(mission.upset_tilt_rad)
+        assert flight.run(5.0, until=upset)
+        t_upset = flight.t_s
+        assert flight.run(mission.upset_s + 0.1,
+                          until=lambda f: f.core.mission.mode == Mode.IDLE)
+        # odometry comes a tick late: the rotors stop upset_s after the truth passed the limit
+        assert flight.t_s - t_upset == pytest.approx(mission.upset_s, abs=0.02)
+        assert flight.status['failsafe_reason'] == 'upset'
+        flight.step()
+        assert np.all(flight.log[-1]['command'].thrusts_n == 0.0)
+    finally:
+        flight.close()
+
+
 def test_force_above_the_limit_retreats():
     # Start near the wall so the approach is short.
     scenario = dataclasses.replace(SCENARIO, start_xyz_m=[1.3, 0.0, 0.0])

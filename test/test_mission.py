@@ -471,6 +471,82 @@ def test_a_landing_that_meets_a_wall_backs_off_horizontally_and_descends_on():
                                atol=cfg.arrive_tol_m)
 
 
+def _landing_on_a_roof():
+    """Hovering, then landing where the ground stands a fresh 0.35-3 m above ground_z_m
+    (a roof, a box; or ground_z_m set too low): the tracker stops the body there."""
+    roof_m = float(np.random.default_rng().uniform(0.35, 3.0))
+    cfg = MissionConfig(ground_z_m=-roof_m)
+    flight = _hovering(cfg)
+    assert flight.mission.land()[0]
+    return flight, roof_m
+
+
+def _setpoint_z(flight):
+    sp = flight.log[-1][2]
+    return (sp.origin_map + sp.R_map_t @ sp.lambda_d_t)[2]
+
+
+def test_a_landing_stopped_above_ground_z_lands_where_it_stopped():
+    flight, roof_m = _landing_on_a_roof()
+    cfg = flight.config
+    # stopped once its setpoint passes land_detect_height_m below it, landed land_detect_s on
+    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land_detect_height_m, 30.0,
+                     target=None)
+    t_held = flight.t_s
+    flight.run_to(Mode.IDLE, timeout_s=cfg.land_detect_s + 0.1, target=None)
+    assert flight.t_s - t_held == pytest.approx(cfg.land_detect_s, abs=2 * DT_S)
+    event = flight.mission.events[-1]
+    assert event['reason'] == f'landed {GEAR_Z_M + roof_m:.2f} m above ground_z_m'
+    assert flight.mission.status['failsafe_reason'] == ''
+
+
+def test_a_landing_held_by_its_tool_is_not_landed():
+    flight, roof_m = _landing_on_a_roof()
+    cfg = flight.config
+    # the tool rests on a ledge: the ledge pushes it up, the vehicle hangs from it
+    hanging = dict(target=None, f_map=np.array([0.0, 0.0, 2.0 * cfg.free_flight_contact_n]))
+    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land_detect_height_m, 30.0,
+                     **hanging)
+    flight.run_for(2.0 * cfg.land_detect_s, **hanging)
+    assert flight.mission.mode == Mode.LAND
+    # off the ledge onto its gear: landed
+    flight.run_to(Mode.IDLE, timeout_s=cfg.land_detect_s + 0.1, target=None)
+
+
+def _tilted(flight, tilt_rad):
+    """From now on the vehicle stays where it is, tilted by ``tilt_rad`` about a fresh
+    horizontal axis."""
+    axis = np.random.default_rng().normal(size=3) * [1.0, 1.0, 0.0]
+    q = Rotation.from_rotvec(axis / np.linalg.norm(axis) * tilt_rad).as_quat()
+    flight.q = q
+    flight._track = lambda sp: setattr(flight, 'q', q)
+
+
+def test_an_upset_stops_the_rotors():
+    cfg = MissionConfig()
+    flight = _in_mode(Mode.APPROACH, cfg)
+    rng = np.random.default_rng()
+    # tilted past the limit for less than upset_s, then upright again: flying on
+    _tilted(flight, cfg.upset_tilt_rad + rng.uniform(0.02, 2.0))
+    flight.run_for(cfg.upset_s - 3 * DT_S)
+    del flight._track
+    flight.run_for(0.5)
+    assert flight.mission.mode == Mode.APPROACH
+    # just under the limit for long: flying on
+    _tilted(flight, cfg.upset_tilt_rad - 0.02)
+    flight.run_for(5.0 * cfg.upset_s)
+    assert flight.mission.mode == Mode.APPROACH
+    # past it for upset_s: the rotors stop, the plan ends
+    _tilted(flight, cfg.upset_tilt_rad + rng.uniform(0.02, 2.0))
+    t0 = flight.t_s
+    flight.run_until(lambda f: f.mission.mode != Mode.APPROACH, cfg.upset_s + 0.1)
+    assert flight.t_s - t0 == pytest.approx(cfg.upset_s, abs=2 * DT_S)
+    assert flight.mission.mode == Mode.IDLE
+    status = flight.mission.status
+    assert status['failsafe_reason'] == 'upset' and not status['success']
+    assert [r.reason for r in flight.mission.records] == ['upset']
+
+
 def test_hover_backs_off_what_the_tool_touches_and_holds_there():
     cfg = MissionConfig()
     flight = _hovering(cfg)

@@ -146,6 +146,12 @@ class MissionConfig:
     land_detect_height_m: float = param(0.3, lo=0.0, hi=2.0)  # above ground_z_m
     land_detect_speed_m_s: float = param(0.1, lo=0.01, hi=1.0)
     land_detect_s: float = param(0.5, lo=0.0, hi=10.0)
+    # Upset (as PX4's failure detector): tilted past upset_tilt_rad for upset_s, the rotors
+    # stop (failsafe `upset`); upside down they would only drive the vehicle into what is
+    # near. Missions tilt to 25 degrees at most (roll limit 34, walls leaning 25); a vehicle
+    # that lost a rotor tumbles, each half turn past 60 degrees for about 0.3 s.
+    upset_tilt_rad: float = param(1.05, lo=0.3, hi=3.2)
+    upset_s: float = param(0.1, lo=0.0, hi=10.0)
     arrive_tol_m: float = param(0.05, lo=0.001, hi=1.0)
     arrive_speed_m_s: float = param(0.1, lo=0.001, hi=1.0)
     arrive_yaw_tol_rad: float = param(0.05, lo=0.001, hi=1.0)
@@ -283,6 +289,7 @@ class Mission:
         self._target_seen_s = -np.inf
         self._last_tick_s = None
         self._landing_since_s = None
+        self._upset_since_s = None
         self._contact_ticks = 0
         self._contact_phase = ''       # CONTACT: 'close', 'touch', 'press'
         self._aligning = False         # CONTACT touch: the creep paused (touch_align_m)
@@ -463,6 +470,8 @@ class Mission:
             return ImpedanceSetpoint()
         if stale and self._mode not in (Mode.IDLE, Mode.FAILSAFE_LAND):
             self._failsafe('odometry_stale', Mode.FAILSAFE_LAND)
+        elif not stale:
+            self._check_upset()
         if isinstance(self.task, Slide) and self._mode in IN_TARGET_FRAME:
             # a slide's line is on the site's wall: no detection, the touch finds the surface
             target = TargetEstimate(self.task.points_map[0], self.task.normal_map, 0.0, True)
@@ -971,15 +980,23 @@ class Mission:
             self._clear_vertically(cfg.ground_z_m, cfg.descent_rate_m_s)
             if self._flight_phase:
                 return
-        low = self._state.p_map[2] < cfg.ground_z_m + cfg.land_detect_height_m
+        z_m = self._state.p_map[2]
+        low = z_m < cfg.ground_z_m + cfg.land_detect_height_m
+        # Or stopped on something higher (a roof, a box; ground_z_m set too low, odometry
+        # drifting up): that far above its descending setpoint, no free flight keeps still
+        # (the spring alone pulls at K_z h / M, about 1.9 m/s^2 at 0.3 m). Resting on its
+        # gear, not hanging by its tool, which would fall once the rotors stop.
+        held = (z_m > self._ref_map()[0][2] + cfg.land_detect_height_m
+                and self._bump() is None)
         slow = np.linalg.norm(self._state.v_map) < cfg.land_detect_speed_m_s
-        if not (low and slow):
+        if not ((low or held) and slow):
             self._landing_since_s = None
         elif self._landing_since_s is None:
             self._landing_since_s = self._now_s
         elif self._now_s - self._landing_since_s >= cfg.land_detect_s:
             self._success = self._completed
-            self._enter(Mode.IDLE, 'landed')
+            self._enter(Mode.IDLE, 'landed' if low else
+                        f'landed {z_m - cfg.ground_z_m:.2f} m above ground_z_m')
 
     def _tick_failsafe_land(self, target, f_n, stale):
         # blind: position cannot be trusted, so landing is declared after the time the
@@ -1024,6 +1041,17 @@ class Mission:
         if mode == Mode.RETREAT:
             self._after_retreat = Mode.LAND
         self._enter(mode, reason)
+
+    def _check_upset(self):
+        cfg = self.config
+        x, y, z, w = np.asarray(self._state.q_map_base, dtype=float).tolist()
+        cos_tilt = 1.0 - 2.0 * (x * x + y * y) / (x * x + y * y + z * z + w * w)
+        if self._mode == Mode.IDLE or cos_tilt >= math.cos(cfg.upset_tilt_rad):
+            self._upset_since_s = None
+        elif self._upset_since_s is None:
+            self._upset_since_s = self._now_s
+        elif self._now_s - self._upset_since_s >= cfg.upset_s:
+            self._failsafe('upset', Mode.IDLE)
 
     def _can_arm(self):
         if self._mode != Mode.IDLE:
