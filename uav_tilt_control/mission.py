@@ -148,7 +148,7 @@ class MissionConfig:
     land_detect_s: float = param(0.5, lo=0.0, hi=10.0)
     # Upset (as PX4's failure detector): tilted past upset_tilt_rad for upset_s, the rotors
     # stop (failsafe `upset`); upside down they would only drive the vehicle into what is
-    # near. Missions tilt to 25 degrees at most (roll limit 34, walls leaning 25); a vehicle
+    # near. Missions tilt to 26 degrees at most (60 campaign draws; roll limit 34); a vehicle
     # that lost a rotor tumbles, each half turn past 60 degrees for about 0.3 s.
     upset_tilt_rad: float = param(1.05, lo=0.3, hi=3.2)
     upset_s: float = param(0.1, lo=0.0, hi=10.0)

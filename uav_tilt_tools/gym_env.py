@@ -47,7 +47,7 @@ over its ticks; so an episode's return is (HOLD ticks / ticks per step) times on
 the mission's (force_rms_error_n / force_scale_n)^2 and poi_error_m / poi_scale_m.
 
 **Termination**: the hold completed (success); a failsafe of the mission (force limit, no
-contact, target lost, stale odometry), the contact lost in HOLD, a push above the force
+contact, target lost, stale odometry, upset), the contact lost in HOLD, a push above the force
 limit, the vehicle below ``ground_clearance_m`` near the wall or tilted past
 ``max_tilt_deg``: each a failure, rewarded ``-failure_penalty``. Truncation after
 ``episode_s`` of simulated time. ``info`` has the world seed, the mode and phase, the
