@@ -198,6 +198,26 @@ class TargetFrame(typing.NamedTuple):
     tool_shift_t: np.ndarray
 
 
+class Persistence:
+    """Whether a condition has held for a while (PX4's systemlib::Hysteresis, one way):
+    :meth:`update` each tick says so once it has held ``hold_s`` since it began."""
+
+    def __init__(self):
+        self.since_s = None
+
+    def reset(self):
+        self.since_s = None
+
+    def update(self, holds, now_s, hold_s):
+        if not holds:
+            self.since_s = None
+            return False
+        if self.since_s is None:
+            self.since_s = now_s
+            return False
+        return now_s - self.since_s >= hold_s
+
+
 class SearchState:
     """Where SEARCH is: its phase, the turn swept so far, the candidate being confirmed."""
 
@@ -288,8 +308,8 @@ class Mission:
         self._resume_mode = Mode.APPROACH
         self._target_seen_s = -np.inf
         self._last_tick_s = None
-        self._landing_since_s = None
-        self._upset_since_s = None
+        self._landing = Persistence()
+        self._upset = Persistence()
         self._contact_ticks = 0
         self._contact_phase = ''       # CONTACT: 'close', 'touch', 'press'
         self._aligning = False         # CONTACT touch: the creep paused (touch_align_m)
@@ -966,7 +986,7 @@ class Mission:
 
     def _enter_land(self, previous, target):
         cfg = self.config
-        self._landing_since_s = None
+        self._landing.reset()
         rate = cfg.descent_rate_m_s if self._mode == Mode.LAND else cfg.failsafe_descent_rate_m_s
         p0 = self._ref_map()[0]
         self._plan(np.array([p0[0], p0[1], cfg.ground_z_m]), rate)
@@ -989,11 +1009,7 @@ class Mission:
         held = (z_m > self._ref_map()[0][2] + cfg.land_detect_height_m
                 and self._bump() is None)
         slow = np.linalg.norm(self._state.v_map) < cfg.land_detect_speed_m_s
-        if not ((low or held) and slow):
-            self._landing_since_s = None
-        elif self._landing_since_s is None:
-            self._landing_since_s = self._now_s
-        elif self._now_s - self._landing_since_s >= cfg.land_detect_s:
+        if self._landing.update((low or held) and slow, self._now_s, cfg.land_detect_s):
             self._success = self._completed
             self._enter(Mode.IDLE, 'landed' if low else
                         f'landed {z_m - cfg.ground_z_m:.2f} m above ground_z_m')
@@ -1044,13 +1060,8 @@ class Mission:
 
     def _check_upset(self):
         cfg = self.config
-        x, y, z, w = np.asarray(self._state.q_map_base, dtype=float).tolist()
-        cos_tilt = 1.0 - 2.0 * (x * x + y * y) / (x * x + y * y + z * z + w * w)
-        if self._mode == Mode.IDLE or cos_tilt >= math.cos(cfg.upset_tilt_rad):
-            self._upset_since_s = None
-        elif self._upset_since_s is None:
-            self._upset_since_s = self._now_s
-        elif self._now_s - self._upset_since_s >= cfg.upset_s:
+        tilted = _cos_tilt_of(self._state) < math.cos(cfg.upset_tilt_rad)
+        if self._upset.update(self._mode != Mode.IDLE and tilted, self._now_s, cfg.upset_s):
             self._failsafe('upset', Mode.IDLE)
 
     def _can_arm(self):
@@ -1243,6 +1254,12 @@ def _distance_to_polyline(p, vertices):
 def _finite_state(state):
     return state is not None and all(map(math.isfinite, np.concatenate(
         (state.p_map, state.q_map_base, state.v_map)).tolist()))
+
+
+def _cos_tilt_of(state):
+    """Cosine of the angle between the body's z axis and the vertical."""
+    x, y, z, w = np.asarray(state.q_map_base, dtype=float).tolist()
+    return 1.0 - 2.0 * (x * x + y * y) / (x * x + y * y + z * z + w * w)
 
 
 def _yaw_of(state):
