@@ -52,6 +52,39 @@ def test_targets_without_ids_or_of_another_class_are_rejected():
             check_scenario(from_dict(Scenario, {'objects': objects}))
 
 
+def test_a_start_behind_the_wall_or_an_object_off_it_is_rejected():
+    rng = np.random.default_rng()
+    for _ in range(20):
+        yaw_deg, inclination_deg = rng.uniform(-180, 180), rng.uniform(-30, 30)
+        width_m, height_m = rng.uniform(1.0, 8.0), rng.uniform(1.0, 6.0)
+        heading = np.radians(yaw_deg + rng.uniform(-80, 80))  # the wall seen ahead
+        position_m = (rng.uniform(0.5, 6.0) * np.array([np.cos(heading), np.sin(heading)])
+                      + rng.uniform(-5, 5, 2))
+        start = [*(position_m - rng.uniform(0.5, 6.0) * np.array(
+            [np.cos(heading), np.sin(heading)])), 0.0]
+
+        def scenario(start_xyz_m, u_m=0.0, v_m=height_m / 2):
+            return from_dict(Scenario, {
+                'start_xyz_m': [float(x) for x in start_xyz_m],
+                'wall': {'position_m': position_m.tolist(), 'yaw_deg': float(yaw_deg),
+                         'inclination_deg': float(inclination_deg),
+                         'width_m': float(width_m), 'height_m': float(height_m)},
+                'objects': [{'cls': 'gauge', 'u_m': float(u_m), 'v_m': float(v_m)}]})
+
+        # start positions are drawn around the wall, not along its normal: the check has
+        # to find the face's side from the wall's yaw, whatever the bearing
+        check_scenario(scenario(start))
+        behind = 2 * position_m - np.asarray(start[:2])
+        with pytest.raises(ConfigError, match=r"'start_xyz_m' .* behind the wall's face"):
+            check_scenario(scenario([*behind, 0.0]))
+        edge_u = rng.choice([-1, 1]) * width_m / 2
+        check_scenario(scenario(start, u_m=0.98 * edge_u, v_m=0.99 * height_m))
+        with pytest.raises(ConfigError, match=r"'objects\[0\]\.u_m' .* off the wall"):
+            check_scenario(scenario(start, u_m=1.02 * edge_u))
+        with pytest.raises(ConfigError, match=r"'objects\[0\]\.v_m' .* above the wall"):
+            check_scenario(scenario(start, v_m=1.02 * height_m))
+
+
 def test_several_targets_each_have_their_ground_truth():
     scenario = load_scenario(SCENARIOS[0].parent / 'plan.yaml')
     assert target_ids(scenario) == ['plate_a', 'plate_b']

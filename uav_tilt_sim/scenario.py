@@ -5,6 +5,7 @@ import re
 
 from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError, load_yaml, nested, param
+from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_common.targets import OBJECT_CLASSES
 
 # The scenario of an empty ``scenario_file``, relative to the package's files.
@@ -101,8 +102,10 @@ def load_scenario(path: str | os.PathLike[str] | None = None,
 
 
 def check_scenario(scenario: Scenario) -> Scenario:
-    """Checks across fields: targets are bolt plates; several targets need ids, and ids are
+    """Checks across fields: the start stands in front of the wall's face and every object's
+    centre lies on the wall; targets are bolt plates; several targets need ids, and ids are
     unique ROS name tokens. Returns the scenario."""
+    _check_on_the_wall(scenario)
     targets = [(i, o) for i, o in enumerate(scenario.objects) if o.target]
     for i, o in targets:
         if o.cls != TARGET_CLASS:
@@ -119,6 +122,27 @@ def check_scenario(scenario: Scenario) -> Scenario:
         if o.id and ids.count(o.id) > 1:
             raise ConfigError(f"parameter 'objects[{i}].id' = {o.id!r} is not unique")
     return scenario
+
+
+def _check_on_the_wall(scenario: Scenario) -> None:
+    # Both are easy slips in a hand-written file (a swapped sign, a height above the wall's)
+    # that would fly a world with nothing to inspect: the face turned away from the vehicle,
+    # or a panel hanging in the air beside the wall.
+    wall = scenario.wall
+    R_map_wall = wall_rotation(wall.yaw_deg, wall.inclination_deg)
+    in_front_m = sum((scenario.start_xyz_m[k] - wall.position_m[k]) * R_map_wall[k, 2]
+                     for k in (0, 1))
+    if in_front_m <= 0.0:
+        raise ConfigError(f"parameter 'start_xyz_m' = {scenario.start_xyz_m} is behind the "
+                          f"wall's face (wall.position_m {wall.position_m}, yaw_deg "
+                          f"{wall.yaw_deg}: the heading from the start to the wall)")
+    for i, o in enumerate(scenario.objects):
+        if abs(o.u_m) > wall.width_m / 2:
+            raise ConfigError(f"parameter 'objects[{i}].u_m' = {o.u_m} is off the wall "
+                              f"(|u_m| <= wall.width_m / 2 = {wall.width_m / 2})")
+        if o.v_m > wall.height_m:
+            raise ConfigError(f"parameter 'objects[{i}].v_m' = {o.v_m} is above the wall "
+                              f"(wall.height_m = {wall.height_m})")
 
 
 def target_ids(scenario):
