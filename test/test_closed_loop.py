@@ -224,6 +224,27 @@ def test_a_landing_tracks_its_descent_with_a_mass_error():
         flight.close()
 
 
+def test_a_flight_with_noisy_f_t_and_velocity_takes_off_hovers_and_lands():
+    # Fresh noise beyond the campaign's: the F/T's norm past free_flight_contact_n (1 N)
+    # several times a second, a third or more of the odometry's speeds past the 0.1 m/s of
+    # arrival and landing. The mission decides on them low-passed.
+    rng = np.random.default_rng()
+    noise = dataclasses.replace(SCENARIO.noise, ft_force_n=float(rng.uniform(0.3, 0.45)),
+                                odom_vel_m_s=float(rng.uniform(0.05, 0.1)))
+    config = _config()
+    flight = _hovering(config, dataclasses.replace(SCENARIO, noise=noise))
+    try:
+        flight.run(10.0)
+        assert flight.core.land()[0]
+        assert flight.run(20.0, until=lambda f: f.core.mission.mode == Mode.IDLE), noise
+        mission = flight.core.mission
+        assert not [e for e in mission.events if e['reason'].startswith('touched')], noise
+        assert mission.events[-1]['reason'] == 'landed'
+        assert flight.plant.state().p_map[2] < config.mission.land_detect_height_m
+    finally:
+        flight.close()
+
+
 def test_a_landing_on_ground_higher_than_ground_z_lands_there():
     # ground_z_m a fresh 0.4-1.5 m below the real ground (as odometry drifting up, or a
     # roof, would make it): the descent stops on the ground and the rotors stop there

@@ -4,6 +4,8 @@ The "vehicle" is wherever the previous setpoint put it, except that the wall sto
 tip and the ground stops the body; while pushed against the wall with contact gains it
 measures the impedance spring force K_z * (tool_tip_x - lambda_d_z).
 """
+import math
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -73,6 +75,18 @@ class Flight:
         self.p, self.v = p, v
         self.q = Rotation.from_euler('ZY', [sp.yaw_rad, sp.pitch_rad]).as_quat()
 
+    def touch(self, f_map, **kw):
+        """Hold the F/T force ``f_map`` on the vehicle, as a touch does, until the mission
+        reacts (its mode or phase changes), which must be within :func:`touch_ticks`.
+        Returns where the vehicle was when it reacted."""
+        before = (self.mission.mode, self.mission.phase)
+        for _ in range(touch_ticks(self.config, f_map, DT_S)):
+            p = self.p.copy()
+            self.step(f_map=f_map, **kw)
+            if (self.mission.mode, self.mission.phase) != before:
+                return p
+        raise AssertionError(f'{f_map} N held: no reaction in {before}')
+
     def run_until(self, predicate, timeout_s, **kw):
         t_end = self.t_s + timeout_s
         while not predicate(self):
@@ -85,6 +99,16 @@ class Flight:
 
     def run_to(self, mode, timeout_s=60.0, **kw):
         self.run_until(lambda f: f.mission.mode == mode, timeout_s, **kw)
+
+
+def touch_ticks(config, f_map, dt_s):
+    """Ticks of ``dt_s`` in which a force ``f_map`` held from rest is felt: its first-order
+    low-pass (free_flight_contact_tau_s) passes free_flight_contact_n after
+    tau ln(F / (F - F_min)), so within the tick after that."""
+    f_n = float(np.linalg.norm(f_map))
+    felt_s = config.free_flight_contact_tau_s * math.log(
+        f_n / (f_n - config.free_flight_contact_n))
+    return math.floor(felt_s / dt_s) + 1
 
 
 def _hovering(config=None):
@@ -145,6 +169,49 @@ def test_happy_path_visits_every_mode_and_succeeds(target):
         mode == Mode.RETREAT and sp.lambda_d_t[2] < tip)) for _, mode, sp, _ in flight.log)
     assert any(mode == Mode.RETREAT and sp.contact_gains for _, mode, sp, _ in flight.log)
     assert flight.p[2] == pytest.approx(GEAR_Z_M)
+
+
+class NoisyFlight(Flight):
+    """A Flight whose odometry velocity and F/T force carry white noise of ``sigma_v_m_s``
+    and ``sigma_f_n`` per axis, drawn afresh every tick."""
+
+    def __init__(self, sigma_v_m_s, sigma_f_n, config=None):
+        self.rng = np.random.default_rng()
+        self.sigma_v_m_s, self.sigma_f_n = sigma_v_m_s, sigma_f_n
+        super().__init__(config)
+
+    def state(self):
+        state = super().state()
+        state.v_map = state.v_map + self.sigma_v_m_s * self.rng.normal(size=3)
+        return state
+
+    def step(self, target='default', force_n=None, odom_age_s=0.0, f_map=None):
+        noise = self.sigma_f_n * self.rng.normal(size=3)
+        force_n = (self.force_n if force_n is None else force_n) + noise @ NORMAL
+        f_map = noise if f_map is None else f_map + noise
+        return super().step(target, force_n, odom_age_s, f_map)
+
+
+def test_sensor_noise_in_free_flight_is_no_touch_and_the_vehicle_lands():
+    # Fresh noise where the raw samples decide wrong: the F/T's 3-axis norm past 1 N once
+    # in a thousand ticks or more (2.9-4 sigma), a third or more of the velocity samples
+    # past the 0.1 m/s of arrival and landing.
+    rng = np.random.default_rng()
+    flight = NoisyFlight(rng.uniform(0.04, 0.08), rng.uniform(0.25, 0.35))
+    cfg = flight.config
+    assert flight.mission.takeoff()[0]
+    flight.run_to(Mode.HOVER, timeout_s=20.0)
+    flight.run_for(30.0)
+    assert flight.mission.land()[0]
+    flight.run_until(lambda f: f.p[2] == GEAR_Z_M, 30.0)
+    touchdown_s = flight.t_s
+    flight.run_to(Mode.IDLE, timeout_s=10.0)
+    assert flight.modes == [Mode.IDLE, Mode.TAKEOFF, Mode.HOVER, Mode.LAND, Mode.IDLE]
+    assert not [e for e in flight.mission.events if e['reason'].startswith('touched')]
+    # landed as without noise: once the low-passed speed has fallen from the descent's to
+    # land_detect_speed_m_s, land_detect_s later
+    settle_s = cfg.speed_tau_s * math.log(cfg.descent_rate_m_s / cfg.land_detect_speed_m_s)
+    assert flight.t_s - touchdown_s <= settle_s + cfg.land_detect_s + 3 * DT_S
 
 
 def test_references_are_consistent_and_speed_limited():
@@ -350,12 +417,12 @@ def test_search_backs_off_what_the_tool_touches_then_turns_on():
     cfg = MissionConfig()
     flight = _in_mode(Mode.SEARCH, cfg)
     flight.run_for(2.0, target=None)
-    # below the threshold (F/T noise, a brush) the turn goes on
-    flight.step(target=None, f_map=np.array([0.0, -0.9, 0.0]) * cfg.free_flight_contact_n)
+    # below the threshold (a brush), however long, the turn goes on
+    flight.run_for(1.0, target=None, f_map=np.array([0.0, -0.9, 0.0]) * cfg.free_flight_contact_n)
     assert flight.mission.phase == 'sweep'
-    p0 = flight.p.copy()
+    flight.run_for(0.3, target=None)        # the brush forgotten (10 tau)
     push = np.array([0.0, -1.2, 0.5])       # the vehicle pushed away from something in +y
-    flight.step(target=None, f_map=push)
+    p0 = flight.touch(push, target=None)
     assert flight.mission.phase == 'clear'
     start = len(flight.log)
     flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
@@ -373,7 +440,7 @@ def test_a_climb_that_meets_a_wall_turns_where_it_backed_off():
     flight = _in_mode(Mode.SEARCH, cfg)
     flight.run_until(lambda f: f.mission.phase == 'climb', 10.0, target=None)
     flight.run_for(0.5, target=None)
-    flight.step(target=None, f_map=np.array([-1.5, 0.0, -1.5]))   # a wall leaning over
+    flight.touch(np.array([-1.5, 0.0, -1.5]), target=None)   # a wall leaning over
     flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
     resumed_s, z = flight.t_s, flight.p[2]
     assert z < cfg.takeoff_altitude_m + cfg.search_climb_m - cfg.free_flight_clearance_m / 2
@@ -395,12 +462,12 @@ def test_a_takeoff_that_meets_a_wall_backs_off_horizontally_and_climbs_on():
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.p[2] > 0.8, 10.0, target=None)
     # below the threshold the climb goes on
-    flight.step(target=None, f_map=np.array([-0.9, 0.0, 0.0]) * cfg.free_flight_contact_n)
+    flight.run_for(0.3, target=None, f_map=np.array([-0.9, 0.0, 0.0]) * cfg.free_flight_contact_n)
     assert flight.mission.phase == ''
+    flight.run_for(0.3, target=None)
     # the tool under a wall leaning over the start: pushed away from it and down
     push = np.array([-1.4, 0.6, -0.7])
-    p0 = flight.p.copy()
-    flight.step(target=None, f_map=push)
+    p0 = flight.touch(push, target=None)
     assert (flight.mission.mode, flight.mission.phase) == (Mode.TAKEOFF, 'clear')
     flight.run_until(lambda f: f.mission.phase == '', 10.0, target=None)
     away = push * [1.0, 1.0, 0.0]
@@ -422,7 +489,7 @@ def test_a_takeoff_pushed_down_from_above_lands():
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.p[2] > 0.8, 10.0, target=None)
     # a ceiling: the push has less horizontal part than a wall 70 degrees from vertical
-    flight.step(target=None, f_map=np.array([0.3, 0.0, -1.5]))
+    flight.touch(np.array([0.3, 0.0, -1.5]), target=None)
     assert flight.mission.mode == Mode.LAND
     flight.run_to(Mode.IDLE, target=None, timeout_s=20.0)
     status = flight.mission.status
@@ -454,12 +521,12 @@ def test_a_landing_that_meets_a_wall_backs_off_horizontally_and_descends_on():
     assert flight.mission.land()[0]
     flight.run_until(lambda f: f.p[2] < 1.0, 10.0, target=None)
     # a push from below, the ground under the tool, is no obstacle: the descent goes on
-    flight.step(target=None, f_map=np.array([0.2, 0.0, 1.5]))
+    flight.run_for(0.2, target=None, f_map=np.array([0.2, 0.0, 1.5]))
     assert (flight.mission.mode, flight.mission.phase) == (Mode.LAND, '')
+    flight.run_for(0.2, target=None)
     # a wall leaning away from the vehicle, met on the way down: pushed away and up
     push = np.array([0.3, -1.3, 0.6])
-    p0 = flight.p.copy()
-    flight.step(target=None, f_map=push)
+    p0 = flight.touch(push, target=None)
     assert flight.mission.phase == 'clear'
     flight.run_until(lambda f: f.mission.phase == '', 10.0, target=None)
     moved = flight.p - p0
@@ -550,9 +617,8 @@ def test_an_upset_stops_the_rotors():
 def test_hover_backs_off_what_the_tool_touches_and_holds_there():
     cfg = MissionConfig()
     flight = _hovering(cfg)
-    p0 = flight.p.copy()
     push = np.array([0.5, -1.5, 0.3])
-    flight.step(target=None, f_map=push)
+    p0 = flight.touch(push, target=None)
     assert flight.mission.phase == 'clear'
     ok, why = flight.mission.set_hover_setpoint([0.0, 0.0, 2.0], 0.0)
     assert not ok and '(clear)' in why
@@ -614,7 +680,7 @@ def test_an_arrival_late_but_within_the_timeout_goes_on(mode):
 def test_a_back_off_that_is_held_goes_on_from_where_it_got_to():
     cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
     flight = _hovering(cfg)
-    flight.step(target=None, f_map=np.array([0.0, -1.5, 0.0]))
+    flight.touch(np.array([0.0, -1.5, 0.0]), target=None)
     assert flight.mission.phase == 'clear'
     _held(flight)
     deadline_s = _deadline_s(flight)

@@ -14,6 +14,7 @@ from uav_tilt_control import mission as mission_module
 from uav_tilt_control.mission import MODES, Mission, MissionConfig, Mode
 from uav_tilt_control.plan import Slide, Touch
 from uav_tilt_control.target_estimator import TargetEstimate
+from test_mission import touch_ticks
 
 DT_S = 0.01
 VEHICLE = VehicleParams()
@@ -234,10 +235,13 @@ def test_a_transit_that_meets_a_wall_backs_off_and_searches_from_there():
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.mission.phase == 'transit' and f.mission.task.target == 'b'
                      and np.linalg.norm(f.v) > 0.2)
-    p0 = flight.p.copy()
     push = np.array([-0.4, 1.5, 0.0])
     flight.f_map = push
-    flight.step()
+    for _ in range(touch_ticks(cfg, push, DT_S)):
+        p0 = flight.p.copy()
+        flight.step()
+        if flight.mission.phase == 'clear':
+            break
     flight.f_map = None
     assert flight.mission.phase == 'clear'
     flight.run_until(lambda f: f.mission.mode == Mode.SEARCH, 20.0)

@@ -13,6 +13,7 @@ from uav_tilt_common.config import param
 from uav_tilt_common.geometry import (euler_zyx_to_matrix, matrix_to_quat, quat_multiply,
                                       quat_to_rotvec)
 from uav_tilt_common.state import VehicleState
+from uav_tilt_control.lowpass import cutoff_tau_s, lowpass_weight
 
 
 @dataclasses.dataclass
@@ -88,7 +89,7 @@ class AttitudePid:
         rate = np.asarray(state.w_base, dtype=float).tolist()
         prev, d_rate, integral = self._rate_prev, self._d_rate.tolist(), self.integral.tolist()
         if prev is not None:
-            blend = 1.0 - math.exp(-2.0 * math.pi * self.config.d_cutoff_hz * dt_s)
+            blend = lowpass_weight(dt_s, cutoff_tau_s(self.config.d_cutoff_hz))
             d_rate = [d + blend * ((r - r0) / dt_s - d) for d, r, r0 in zip(d_rate, rate, prev)]
         self._rate_prev = rate
 

@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from uav_tilt_common.config import param
+from uav_tilt_control.lowpass import lowpass_weight
 
 
 @dataclasses.dataclass
@@ -72,13 +73,13 @@ class DisturbanceObserver:
         if self._f_thrust_map is None:
             self._f_thrust_map = self._f_cmd_map.copy()
         # the rotors (and servos) follow the command with a first-order lag
-        lag = 1.0 if self.thrust_tau_s <= 0.0 else 1.0 - math.exp(-dt_s / self.thrust_tau_s)
+        lag = lowpass_weight(dt_s, self.thrust_tau_s)
         self._f_thrust_map = self._f_thrust_map + lag * (self._f_cmd_map - self._f_thrust_map)
         measured = self.mass_kg * (np.asarray(R_map_base) @ np.asarray(specific_force_base))
         residual = (measured - self._f_thrust_map - np.asarray(f_contact_map)) * self._axes
         if not airborne:
             residual[2] = self.f_ext_map[2]
-        self.f_ext_map = self.f_ext_map + (1.0 - math.exp(-dt_s / tau)) * (
+        self.f_ext_map = self.f_ext_map + lowpass_weight(dt_s, tau) * (
             residual - self.f_ext_map)
         norm = math.sqrt(self.f_ext_map @ self.f_ext_map)
         if norm > self.config.limit_n:

@@ -19,6 +19,7 @@ import numpy as np
 
 from uav_tilt_common.config import nested, param
 from uav_tilt_common.vehicle import GRAVITY
+from uav_tilt_control.lowpass import cutoff_tau_s, lowpass_weight
 
 
 @dataclasses.dataclass
@@ -109,7 +110,7 @@ class ImpedanceController:
         estimated external force (wind; see ``disturbance``), compensated.
         """
         cfg = self.config
-        blend = 1.0 - math.exp(-2.0 * math.pi * cfg.contact_cutoff_hz * dt_s)
+        blend = lowpass_weight(dt_s, cutoff_tau_s(cfg.contact_cutoff_hz))
         self.f_contact_map = self.f_contact_map + blend * (
             np.asarray(f_contact_map, dtype=float) - self.f_contact_map)
 

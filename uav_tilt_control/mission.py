@@ -25,6 +25,7 @@ from uav_tilt_common.geometry import matrix_to_euler_zyx
 from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
 from uav_tilt_control.impedance import ImpedanceConfig, contact_depth_for_force
+from uav_tilt_control.lowpass import lowpass_weight
 from uav_tilt_control.plan import Slide, Touch
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.trajectory import MIN_JERK_PEAK, MinJerk, PolylineCruise, Ramp
@@ -89,6 +90,9 @@ class MissionConfig:
     # below, and a push from above lands the take-off), then goes on from there: the climb,
     # the turn, the descent; a transit to the next task searches from there.
     free_flight_contact_n: float = param(1.0, lo=0.1, hi=50.0)
+    # ... told by the F/T force low-passed over this: a touch lasts longer than the sensor's
+    # noise, which at 0.3 N (per axis, every tick) passes 1 N several times a second.
+    free_flight_contact_tau_s: float = param(0.03, lo=0.0, hi=1.0)
     free_flight_clearance_m: float = param(0.6, lo=0.05, hi=5.0)
     # A free-flight segment the vehicle has not arrived at this long after the segment's
     # own time has met something that holds it (the ground, a wall it rests on): APPROACH,
@@ -146,6 +150,10 @@ class MissionConfig:
     land_detect_height_m: float = param(0.3, lo=0.0, hi=2.0)  # above ground_z_m
     land_detect_speed_m_s: float = param(0.1, lo=0.01, hi=1.0)
     land_detect_s: float = param(0.5, lo=0.0, hi=10.0)
+    # Arrival and landing ask whether the vehicle is still, which is its mean speed over a
+    # while, not one odometry sample: they read the velocity low-passed over this (noise of
+    # 0.05 m/s per axis puts a third of the samples over 0.1 m/s).
+    speed_tau_s: float = param(0.1, lo=0.0, hi=2.0)
     # Upset (as PX4's failure detector): tilted past upset_tilt_rad for upset_s, the rotors
     # stop (failsafe `upset`); upside down they would only drive the vehicle into what is
     # near. Missions tilt to 26 degrees at most (60 campaign draws; roll limit 34); a vehicle
@@ -323,7 +331,8 @@ class Mission:
         self.first_touch_peak_n = 0.0
         self._no_force_since_s = None
         self._in_contact = False
-        self._f_contact_map = np.zeros(3)   # the tick's F/T force on the vehicle, map
+        self._f_contact_map = np.zeros(3)   # F/T force on the vehicle, map, low-passed
+        self._v_map = None                  # odometry velocity, low-passed (speed_tau_s)
         self._task_index = -1
         self._records = []
         self.plan_version = 0           # changes whenever a task record does
@@ -484,8 +493,12 @@ class Mission:
         self._now_s = float(now_s)
         self._odom_age_s = float(odom_age_s)
         stale = not (odom_age_s <= cfg.odom_stale_s and _finite_state(state))
+        dt_s = self._tick_dt_s()
         if not stale:
             self._state = state
+            v_map = np.asarray(state.v_map, dtype=float)
+            self._v_map = v_map if self._v_map is None else self._v_map + lowpass_weight(
+                dt_s, cfg.speed_tau_s) * (v_map - self._v_map)
         if self._state is None:
             return ImpedanceSetpoint()
         if stale and self._mode not in (Mode.IDLE, Mode.FAILSAFE_LAND):
@@ -501,8 +514,10 @@ class Mission:
         f_n = float(f_contact_n) if math.isfinite(f_contact_n) else 0.0
         if self._mode in NEAR_WALL and f_n > cfg.force_limit_n:
             self._failsafe('force_limit', Mode.RETREAT)
-        self._f_contact_map = np.zeros(3) if f_contact_map is None or not np.all(
+        f_map = np.zeros(3) if f_contact_map is None or not np.all(
             np.isfinite(f_contact_map)) else np.asarray(f_contact_map, dtype=float)
+        self._f_contact_map = self._f_contact_map + lowpass_weight(
+            dt_s, cfg.free_flight_contact_tau_s) * (f_map - self._f_contact_map)
         MODES[self._mode].tick(self, target, f_n, stale)
         return self._setpoint()
 
@@ -858,7 +873,7 @@ class Mission:
         if self._align_off_t is None:
             self._align_off_t = off_t
         else:
-            self._align_off_t = self._align_off_t + (1.0 - math.exp(-dt / ALIGN_TAU_S)) * (
+            self._align_off_t = self._align_off_t + lowpass_weight(dt, ALIGN_TAU_S) * (
                 off_t - self._align_off_t)
         off_m = float(np.linalg.norm(self._align_off_t))
         self._aligning = (cfg.touch_align_m > 0.0 and off_m > cfg.touch_align_m
@@ -1008,7 +1023,7 @@ class Mission:
         # gear, not hanging by its tool, which would fall once the rotors stop.
         held = (z_m > self._ref_map()[0][2] + cfg.land_detect_height_m
                 and self._bump() is None)
-        slow = np.linalg.norm(self._state.v_map) < cfg.land_detect_speed_m_s
+        slow = np.linalg.norm(self._v_map) < cfg.land_detect_speed_m_s
         if self._landing.update((low or held) and slow, self._now_s, cfg.land_detect_s):
             self._success = self._completed
             self._enter(Mode.IDLE, 'landed' if low else
@@ -1072,7 +1087,7 @@ class Mission:
         return True, ''
 
     def _bump(self):
-        """The tick's F/T force on the vehicle (map) when it says the tool touched
+        """The F/T force on the vehicle (map, low-passed) when it says the tool touched
         something (above free_flight_contact_n), else None."""
         touched = float(np.linalg.norm(self._f_contact_map))
         return self._f_contact_map if touched > self.config.free_flight_contact_n else None
@@ -1183,7 +1198,7 @@ class Mission:
             return False
         p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
         return (np.linalg.norm(p_t - self._tool_shift_t - self._traj.p1) < cfg.arrive_tol_m
-                and np.linalg.norm(self._state.v_map) < cfg.arrive_speed_m_s)
+                and np.linalg.norm(self._v_map) < cfg.arrive_speed_m_s)
 
     def _setpoint(self):
         cfg = self.config

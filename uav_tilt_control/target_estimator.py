@@ -18,6 +18,7 @@ from uav_tilt_common.geometry import quat_slerp, quat_to_matrix
 from uav_tilt_common.pose import Pose
 from uav_tilt_common.targets import is_no_target
 from uav_tilt_control import frames
+from uav_tilt_control.lowpass import lowpass_weight
 from uav_tilt_control.site import HINT_ERROR_M
 
 # The first fix near a hint is taken within the hint's error on the diagonal plus this: the
@@ -246,7 +247,7 @@ class TargetEstimator:
         K = P @ np.linalg.inv(S)
         self._p_map = self._p_map + K @ r
         self._P = (np.eye(3) - K) @ P
-        w = 1.0 if cfg.normal_tau_s == 0.0 else 1.0 - np.exp(-dt / cfg.normal_tau_s)
+        w = lowpass_weight(dt, cfg.normal_tau_s)
         self._n_map = frames.unit(self._n_map + w * (n_map - self._n_map))
         self._stamp_s = max(self._stamp_s, stamp_s)
         self.counters['accepted'] += 1
