@@ -131,6 +131,17 @@ def test_inspection_pushes_5_n_and_reaches_the_poi():
     assert result['max_force_n'] < config.mission.force_limit_n
 
 
+def test_a_wall_softer_than_the_campaign_s_is_pushed_into_and_left():
+    # 5 N on 100-250 N/m sinks the tool 2-5 cm into the plate and the wall, past the
+    # middle of the 1 cm plate: the touch, the hold and the retreat work as on a firm wall.
+    stiffness = float(np.exp(np.random.default_rng().uniform(np.log(100.0), np.log(250.0))))
+    scenario = dataclasses.replace(SCENARIO, wall=dataclasses.replace(
+        SCENARIO.wall, stiffness_n_per_m=stiffness))
+    result = run_mission(scenario, _config(), 120.0)
+    assert [m for _, m in result['mode_history']][-3:] == ['RETREAT', 'LAND', 'IDLE'], stiffness
+    assert result['success'] and result['poi_error_max_m'] < 0.01, stiffness
+
+
 def test_nan_setpoint_is_rejected_and_the_vehicle_holds():
     flight = _hovering()
     try:

@@ -12,6 +12,10 @@ from uav_tilt_sim.visuals import QUAD, Scene, Visual, create_static_body
 
 WALL_THICKNESS_M = 0.2
 PANEL_THICKNESS_M = 0.01
+# A panel's collision box reaches this far behind its face, into the wall. A box that ends
+# 1 cm behind its face, as the panel does, pushes a tool sunk past its middle (a tip 1.2 cm
+# in radius, 5 N on a wall under 300 N/m) out of its back: the wall then holds the tool in.
+PANEL_COLLISION_DEPTH_M = PANEL_THICKNESS_M + WALL_THICKNESS_M / 2
 TILE_M = 0.5     # wall tiles (see visuals.Visual)
 GROUND_HALF_M = 20.0
 GROUND_TILE_M = 2.0
@@ -110,8 +114,8 @@ def _build_object(client: int, scene: Scene | None, cfg: ObjectConfig, origin: n
     half = textures.OBJECT_SIZE_M / 2
     front = origin + R[:, 0] * cfg.u_m + R[:, 1] * cfg.v_m + R[:, 2] * PANEL_THICKNESS_M
     col = p.createCollisionShape(
-        p.GEOM_BOX, halfExtents=[half, half, PANEL_THICKNESS_M / 2],
-        collisionFramePosition=[0, 0, -PANEL_THICKNESS_M / 2], physicsClientId=client)
+        p.GEOM_BOX, halfExtents=[half, half, PANEL_COLLISION_DEPTH_M / 2],
+        collisionFramePosition=[0, 0, -PANEL_COLLISION_DEPTH_M / 2], physicsClientId=client)
     face = Visual(QUAD, (half, half), texture=textures.object_texture(cfg.cls, rng))
     body = create_static_body(client, scene, face, front, quat, col)
     _set_contact(client, body, wall)
