@@ -235,23 +235,31 @@ def test_a_landing_tracks_its_descent_with_a_mass_error():
         flight.close()
 
 
-def test_a_flight_with_noisy_f_t_and_velocity_takes_off_hovers_and_lands():
+def test_a_mission_with_a_noisy_f_t_and_velocity_inspects_and_lands():
     # Fresh noise beyond the campaign's: the F/T's norm past free_flight_contact_n (1 N)
-    # several times a second, a third or more of the odometry's speeds past the 0.1 m/s of
-    # arrival and landing. The mission decides on them low-passed.
+    # several times a second and its normal reading past touch_threshold_n (0.4 N) on two
+    # ticks in a row as often; a third or more of the odometry's speeds past the 0.1 m/s of
+    # arrival and landing.
     rng = np.random.default_rng()
     noise = dataclasses.replace(SCENARIO.noise, ft_force_n=float(rng.uniform(0.3, 0.45)),
                                 odom_vel_m_s=float(rng.uniform(0.05, 0.1)))
     config = _config()
-    flight = _hovering(config, dataclasses.replace(SCENARIO, noise=noise))
+    flight = Flight(dataclasses.replace(SCENARIO, noise=noise), config)
     try:
-        flight.run(10.0)
-        assert flight.core.land()[0]
-        assert flight.run(20.0, until=lambda f: f.core.mission.mode == Mode.IDLE), noise
+        flight.step()
+        assert flight.core.inspect()[0]
+        assert flight.run(120.0, until=lambda f: f.core.mission.mode == Mode.IDLE), noise
+        result = mission_result(flight)
         mission = flight.core.mission
+        assert [m for _, m in result['mode_history']] == [
+            'IDLE', 'TAKEOFF', 'HOVER', 'SEARCH', 'APPROACH', 'CONTACT', 'HOLD', 'RETREAT',
+            'LAND', 'IDLE'], noise
         assert not [e for e in mission.events if e['reason'].startswith('touched')], noise
         assert mission.events[-1]['reason'] == 'landed'
-        assert flight.plant.state().p_map[2] < config.mission.land_detect_height_m
+        assert result['success'] and result['poi_error_max_m'] < 0.01, noise
+        # the F/T reading carries the noise; the wall's true push meets the bar
+        push = np.array([e['push_n'] for e in flight.log if e['mode'] == 'HOLD'])
+        assert push.mean() == pytest.approx(config.contact_force, abs=0.1), noise
     finally:
         flight.close()
 

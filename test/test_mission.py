@@ -214,6 +214,28 @@ def test_sensor_noise_in_free_flight_is_no_touch_and_the_vehicle_lands():
     assert flight.t_s - touchdown_s <= settle_s + cfg.land_detect_s + 3 * DT_S
 
 
+def test_a_noisy_f_t_makes_the_touch_firmer_not_false():
+    # F/T noise that passes touch_threshold_n (0.4 N) on two ticks in a row every second or
+    # so: the touch is felt where the tool really meets the wall, and the inspection works.
+    rng = np.random.default_rng()
+    sigma_f_n = rng.uniform(0.25, 0.4)
+    flight = NoisyFlight(0.0, sigma_f_n)
+    assert flight.mission.inspect()[0]
+    pressed_at_n = []
+    while flight.mission.mode != Mode.IDLE:
+        assert flight.t_s < 150.0, flight.mission.mode
+        was = flight.mission.phase
+        truth_n = flight.force_n            # the wall's push this tick, before the noise
+        flight.step()
+        if was == 'touch' and flight.mission.phase == 'press':
+            pressed_at_n.append(truth_n)
+    assert flight.modes == [Mode.IDLE, Mode.TAKEOFF, Mode.HOVER, Mode.SEARCH, Mode.APPROACH,
+                            Mode.CONTACT, Mode.HOLD, Mode.RETREAT, Mode.LAND, Mode.IDLE]
+    assert flight.mission.status['success'], sigma_f_n
+    # felt once the wall pushed: within the noise of 4 sigma, not on noise alone
+    assert len(pressed_at_n) == 1 and pressed_at_n[0] > 0.0, (sigma_f_n, pressed_at_n)
+
+
 def test_references_are_consistent_and_speed_limited():
     flight = Flight()
     flight.mission.inspect()

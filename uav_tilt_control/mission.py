@@ -118,6 +118,10 @@ class MissionConfig:
     touch_speed_m_s: float = param(0.01, lo=0.001, hi=0.2)
     touch_overrun_m: float = param(0.1, lo=0.0, hi=1.0)     # creep past the estimate, at most
     touch_threshold_n: float = param(0.4, lo=0.05, hi=20.0)  # the first touch
+    # ... or this many times the F/T's noise if more: the RMS of its normal reading over the
+    # approach, in free flight. On two ticks in a row, 4 sigma is passed by noise once in
+    # 10^9 ticks; 0.4 N is 4 sigma of 0.1 N, and a noisier sensor needs a firmer touch.
+    touch_noise_sigmas: float = param(4.0, lo=0.0, hi=20.0)
     # Friction holds the tool where it first touches (mu F_c is far above what the contact
     # stiffness along the wall pulls with): the creep pauses while the tool tip (odometry)
     # is more than touch_align_m off the target in the wall's plane (a gust), for at most
@@ -320,6 +324,7 @@ class Mission:
         self._upset = Persistence()
         self._contact_ticks = 0
         self._contact_phase = ''       # CONTACT: 'close', 'touch', 'press'
+        self._approach_f_n = (0.0, 0)   # sum of squares and count of the F/T's normal reading
         self._aligning = False         # CONTACT touch: the creep paused (touch_align_m)
         self._align_waited_s = 0.0
         self._align_off_t = None        # the tool tip off the target (x_t, y_t), filtered
@@ -795,6 +800,7 @@ class Mission:
         self._event('candidate dropped')
 
     def _enter_approach(self, previous, target):
+        self._approach_f_n = (0.0, 0)
         ref_map = self._ref_map()
         self._set_target_frame(target)
         self._plan_t(self._standoff_t(), self.config.approach_speed_m_s, ref_map)
@@ -805,6 +811,8 @@ class Mission:
         # estimate locked, so the segment goes on. It is lost only if the vehicle, at the
         # standoff and facing it, still does not see it.
         self._track_target(target)
+        total, n = self._approach_f_n
+        self._approach_f_n = (total + f_n * f_n, n + 1)
         yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
         if self._arrived() and abs(yaw_err) < self.config.arrive_yaw_tol_rad:
             if not self._check_target_lost():
@@ -831,7 +839,7 @@ class Mission:
         phase = self._contact_phase
         if phase == 'close':
             # as in the touch, several readings in a row: F/T noise is not the wall
-            self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.touch_threshold_n else 0
+            self._contact_ticks = self._contact_ticks + 1 if f_n > self._touch_threshold_n() else 0
         if phase == 'close' and self._contact_ticks >= cfg.contact_detect_ticks:
             self._start_press()      # the wall is nearer than estimated
         elif phase == 'close' and self._traj.done(self._now_s):
@@ -839,7 +847,7 @@ class Mission:
         elif phase == 'touch':
             self._align_touch()
             self.first_touch_peak_n = max(self.first_touch_peak_n, f_n)
-            self._contact_ticks = self._contact_ticks + 1 if f_n > cfg.touch_threshold_n else 0
+            self._contact_ticks = self._contact_ticks + 1 if f_n > self._touch_threshold_n() else 0
             if self._contact_ticks >= cfg.contact_detect_ticks:
                 self._start_press()
             elif self._traj.done(self._now_s):
@@ -852,6 +860,13 @@ class Mission:
                 self._enter(Mode.SLIDE if isinstance(self.task, Slide) else Mode.HOLD)
             elif self._now_s > self._traj.t0_s + self._traj.T + cfg.press_time_s:
                 self._fail_task('no_contact')
+
+    def _touch_threshold_n(self):
+        """The F/T reading that is a touch: touch_threshold_n, or touch_noise_sigmas times
+        the RMS of the reading over the approach if more."""
+        total, n = self._approach_f_n
+        rms_n = math.sqrt(total / n) if n else 0.0
+        return max(self.config.touch_threshold_n, self.config.touch_noise_sigmas * rms_n)
 
     def _start_touch(self):
         """Creep along -z_t from where the close-in ended until the F/T feels the wall."""
