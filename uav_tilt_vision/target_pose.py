@@ -82,29 +82,35 @@ def estimate_target_pose(u_px: float, v_px: float, depth_m: np.ndarray, K: Camer
 def _robust_plane(pts: NDArray[np.float64], sigma_floor_m: float, rounds: int
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                              float] | None:
-    """(normal toward the camera, centroid, inlier points, residual variance) or None.
+    """(normal toward the camera, a point of the plane at the inliers' centroid, inlier
+    points, residual variance) or None.
 
     A least-median-of-squares seed keeps gross outliers (flying pixels, foreground
-    clutter) from tilting the first fit; least squares rounds then refine it.
+    clutter) from tilting the first fit; least squares rounds then refine it. Those fit
+    inverse depth, which on a plane m.X = D is linear in the normalised image coordinates
+    (1/z = m.(x/z, y/z, 1) / D), because depth noise lies along the rays: a fit across the
+    plane (SVD of the points) tilts towards the noise once it nears the window's extent
+    (a 21 px window 3 m away, depth noise 0.007 z^2: 28 degrees median against 2).
     """
     if len(pts) < _MIN_POINTS:
         return None
     keep = _lmeds_inliers(pts, sigma_floor_m)
+    rays = pts / pts[:, 2:3]                # (x/z, y/z, 1)
+    inverse_depth = 1.0 / pts[:, 2]
     for k in range(rounds + 1):
         if keep.sum() < _MIN_POINTS:
             return None
-        q = pts[keep]
-        c = q.mean(axis=0)
-        _, _, vt = np.linalg.svd(q - c, full_matrices=False)
-        n = vt[2]
+        coef = np.linalg.lstsq(rays[keep], inverse_depth[keep], rcond=None)[0]
+        m = coef / np.linalg.norm(coef)     # away from the camera: m.X = offset > 0
+        offset = 1.0 / np.linalg.norm(coef)
         if k == rounds:
             break
-        keep = _inliers(np.abs((pts - c) @ n), keep, sigma_floor_m)
-    if n @ c > 0:
-        n = -n
-    res = (q - c) @ n
+        keep = _inliers(np.abs(pts @ m - offset), keep, sigma_floor_m)
+    q = pts[keep]
+    res = q @ m - offset
+    c = q.mean(axis=0) - float(res.mean()) * m
     sigma2 = max(float(res @ res) / max(len(q) - 3, 1), sigma_floor_m ** 2)
-    return n, c, q, sigma2
+    return -m, c, q, sigma2
 
 
 def _inliers(abs_res: NDArray[np.float64], keep: NDArray[np.bool_],
