@@ -52,7 +52,7 @@ def estimate_target_pose(u_px: float, v_px: float, depth_m: np.ndarray, K: Camer
                                     NDArray[np.float64]] | None:
     """Point ``p_cam_m``, unit normal ``n_cam`` (toward the camera) and 6x6 covariance.
 
-    A plane is fitted by SVD to the valid depth pixels (finite, > 0) in a
+    A plane is fitted (in inverse depth) to the valid depth pixels (finite, > 0) in a
     (2 window_px + 1)^2 window around (u, v), with ``reject_rounds`` rounds of
     residual-based outlier rejection; the point is the ray through (u, v) cut by
     that plane, so a hole at the POI itself does not matter. None without a fit.
@@ -90,7 +90,7 @@ def _robust_plane(pts: NDArray[np.float64], sigma_floor_m: float, rounds: int
     inverse depth, which on a plane m.X = D is linear in the normalised image coordinates
     (1/z = m.(x/z, y/z, 1) / D), because depth noise lies along the rays: a fit across the
     plane (SVD of the points) tilts towards the noise once it nears the window's extent
-    (a 21 px window 3 m away, depth noise 0.007 z^2: 28 degrees median against 2).
+    (a 21 px window 3 m away, depth noise 0.007 z^2: 28 degrees median against 4).
     """
     if len(pts) < _MIN_POINTS:
         return None
