@@ -116,7 +116,9 @@ class MissionConfig:
     contact_speed_m_s: float = param(0.2, lo=0.01, hi=0.5)
     touch_margin_m: float = param(0.05, lo=0.0, hi=0.5)
     touch_speed_m_s: float = param(0.01, lo=0.001, hi=0.2)
-    touch_overrun_m: float = param(0.1, lo=0.0, hi=1.0)     # creep past the estimate, at most
+    # creep past the estimate, at most (or to the depth that pushes with twice the touch's
+    # threshold, if deeper)
+    touch_overrun_m: float = param(0.1, lo=0.0, hi=1.0)
     touch_threshold_n: float = param(0.4, lo=0.05, hi=20.0)  # the first touch
     # ... or this many times the F/T's noise if more: the RMS of its normal reading over the
     # approach, in free flight. On two ticks in a row, 4 sigma is passed by noise once in
@@ -875,8 +877,13 @@ class Mission:
         self._contact_ticks = 0
         self._aligning, self._align_waited_s, self._align_off_t = False, 0.0, None
         p, _ = self._ref_t()
+        # far enough past the estimate that the spring pushes with twice the touch threshold:
+        # a noisy F/T's firmer touch is reached, and its reading there falls under the
+        # threshold only as rarely as noise passes it
+        overrun_m = max(cfg.touch_overrun_m, contact_depth_for_force(
+            2.0 * self._touch_threshold_n(), self.k_contact_z_n_per_m))
         self._traj = Ramp(self._now_s, p, [0.0, 0.0, -cfg.touch_speed_m_s],
-                          (cfg.touch_margin_m + cfg.touch_overrun_m) / cfg.touch_speed_m_s)
+                          (cfg.touch_margin_m + overrun_m) / cfg.touch_speed_m_s)
         self._event('touching')
 
     def _align_touch(self):
