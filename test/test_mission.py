@@ -774,6 +774,44 @@ def test_after_its_turns_the_search_faces_the_wall_it_saw_from_both_ends_then_la
         assert np.mean([yaws.min(), yaws.max()]) == pytest.approx(np.pi / 2, abs=0.05)
 
 
+@pytest.mark.parametrize('room', ['some', 'none'])
+def test_under_a_wall_leaning_over_the_start_the_search_climbs_as_far_as_the_tool_clears_it(
+        room):
+    # A wall north of the start leaning 10-30 degrees over it, seen in the first turn; at
+    # the takeoff altitude it leaves the tool's reach (tool_tip_x_m plus
+    # search_wall_clearance_m) less room than search_climb_m needs, or none.
+    rng = np.random.default_rng()
+    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
+    flight = _in_mode(Mode.SEARCH, cfg)
+    lean = np.radians(rng.uniform(10.0, 30.0))
+    n = np.array([0.0, -np.cos(lean), -np.sin(lean)])
+    reach_m = VEHICLE.tool_tip_x_m + cfg.search_wall_clearance_m
+    climb_room_m = rng.uniform(0.2, 0.8) * cfg.search_climb_m if room == 'some' else 0.0
+    p0 = flight.p.copy()
+    # horizontally this far from the start's vertical at the takeoff altitude
+    wall_m = reach_m + climb_room_m * np.tan(lean) - (0.0 if room == 'some' else 0.05)
+    on_wall = p0 + [0.0, wall_m, 0.0]
+
+    def seen(f):
+        if f.mission.phase == 'sweep':
+            f.mission.observe_plane(on_wall + [rng.uniform(-2.0, 2.0), 0.0, 0.0], n, 0.3)
+        return f.mission.phase != 'sweep'
+    flight.run_until(seen, 20.0, target=None)
+    if room == 'none':
+        # no room to climb: the next turn is the lower one
+        assert flight.mission.phase == 'descend'
+        return
+    assert flight.mission.phase == 'climb'
+    flight.run_until(lambda f: f.mission.phase == 'sweep', 20.0, target=None)
+    climbed_m = flight.p[2] - p0[2]
+    assert climbed_m == pytest.approx(climb_room_m, abs=cfg.arrive_tol_m)
+    # the tool's reach, turning there, keeps the clearance from the wall (horizontally)
+    clear_m = ((flight.p - on_wall) @ n) / np.cos(lean) - VEHICLE.tool_tip_x_m
+    assert clear_m == pytest.approx(cfg.search_wall_clearance_m,
+                                    abs=cfg.arrive_tol_m * np.tan(lean) + 1e-6)
+    flight.run_until(lambda f: f.mission.phase == 'descend', 20.0, target=None)
+
+
 def test_without_a_wall_seen_the_search_lands_after_its_turns():
     cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
     flight = _in_mode(Mode.SEARCH, cfg)

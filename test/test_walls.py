@@ -84,3 +84,44 @@ def test_the_face_points_stand_off_the_wall_at_the_altitude_and_face_it(draw):
     single, _ = wall.face_points(standoff, altitude, spacing_m=5.0)
     assert len(single) == 1
     np.testing.assert_allclose(single[0], 0.5 * (points[0] + points[1]), atol=1e-9)
+
+
+def _reach_clearance_m(point, n, p, z, reach_m):
+    """How far the nearest point of the horizontal circle of radius ``reach_m`` around
+    (p_x, p_y, z) is in front of the plane (point, n): sampled, not solved."""
+    angles = np.linspace(0.0, 2 * np.pi, 3601)
+    circle = np.stack([p[0] + reach_m * np.cos(angles), p[1] + reach_m * np.sin(angles),
+                       np.full(angles.size, z)], axis=1)
+    return float(((circle - point) @ n).min())
+
+
+@pytest.mark.parametrize('draw', range(4))
+def test_the_altitudes_clear_of_a_leaning_wall_keep_the_reach_in_front_of_it(draw):
+    rng = np.random.default_rng([FRESH, draw])
+    point, n, _ = _wall(rng)
+    memory = WallMemory()
+    assert memory.observe(point, n, 0.5)
+    p, reach_m = np.array([0.0, 0.0, 1.5]), rng.uniform(0.3, 1.0)
+    lo, hi = memory.altitudes_clear_of(p, reach_m)
+    # one end is open: a wall leaning over limits the climb, one leaning away the descent
+    assert (lo == -math.inf) == (n[2] <= 0.0) and (hi == math.inf) == (n[2] >= 0.0)
+    edge = hi if n[2] < 0.0 else lo
+    step = math.copysign(0.01, n[2])
+    # at the limit the reach just meets the plane, a centimetre inside it is clear of it
+    assert _reach_clearance_m(point, n, p, edge, reach_m) == pytest.approx(0.0, abs=1e-4)
+    assert _reach_clearance_m(point, n, p, edge + step, reach_m) > 0.0
+    assert _reach_clearance_m(point, n, p, edge - step, reach_m) < 0.0
+
+
+def test_the_altitudes_clear_of_all_walls_are_those_clear_of_each():
+    memory = WallMemory()
+    assert memory.altitudes_clear_of([0.0, 0.0, 1.5], 0.5) == (-math.inf, math.inf)
+    lean = math.radians(20.0)
+    over = np.array([math.cos(lean), 0.0, -math.sin(lean)])     # leaning over, 2 m west
+    away = np.array([0.0, math.cos(lean), math.sin(lean)])      # leaning away, 3 m south
+    memory.observe([-2.0, 0.0, 1.5], over, 0.5)
+    memory.observe([0.0, -3.0, 1.5], away, 0.5)
+    lo, hi = memory.altitudes_clear_of([0.0, 0.0, 1.5], 0.5)
+    assert (lo, hi) == (memory.walls[1].altitudes_clear_of([0.0, 0.0, 1.5], 0.5)[0],
+                        memory.walls[0].altitudes_clear_of([0.0, 0.0, 1.5], 0.5)[1])
+    assert lo < 1.5 < hi

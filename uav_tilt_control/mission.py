@@ -75,13 +75,17 @@ class MissionConfig:
     # most (vision/planes): from search_face_m in front of each end of what it saw of it,
     # at the takeoff altitude, it sweeps search_face_turn_rad across the wall (a target
     # seen far off its normal from the start is seen nearly head-on there).
-    # search_timeout_s in all, then it lands.
+    # search_timeout_s in all, then it lands. It climbs and descends only as far as keeps
+    # the tool's reach (tool_tip_x_m) search_wall_clearance_m off every wall it has seen,
+    # horizontally: a wall leaning over the start nears as the vehicle climbs, and a turn
+    # there would swing the tool into it.
     search_yaw_rate_rad_s: float = param(0.35, lo=0.0, hi=1.0)  # 0: hover and wait
     search_climb_m: float = param(0.8, lo=0.0, hi=10.0)
     search_descend_m: float = param(0.6, lo=0.0, hi=10.0)   # not below 2 land_detect_height_m
     search_face_m: float = param(2.5, lo=0.0, hi=20.0)      # 0: no facing
     search_face_turn_rad: float = param(2.1, lo=0.1, hi=6.3)
     search_timeout_s: float = param(150.0, lo=0.5, hi=600.0)
+    search_wall_clearance_m: float = param(0.3, lo=0.0, hi=5.0)
     # The tool touched something in free flight (TAKEOFF, HOVER, SEARCH, LAND: a wall
     # leaning over the start as the vehicle climbs or turns, a wall on the way to the next
     # task, one leaning away as it descends): a force on it above free_flight_contact_n
@@ -725,15 +729,8 @@ class Mission:
             d = target[0] - self._state.p_map
             self._yaw_goal = math.atan2(d[1], d[0])
         elif search.phase == 'sweep' and search.swept_rad >= search.turn_rad:
-            levels = self._search_altitudes_m()
-            if search.face_points is None and search.level + 1 < len(levels):
-                search.level += 1
-                p = self._ref_map()[0]
-                search.phase = 'climb' if levels[search.level] > p[2] else 'descend'
-                self._plan(np.array([p[0], p[1], levels[search.level]]), cfg.climb_speed_m_s)
-                self._event(('climbing' if search.phase == 'climb' else 'descending')
-                            + f' to search at {levels[search.level]:.2f} m')
-            elif not self._face_next():
+            if not (search.face_points is None and self._next_level()) \
+                    and not self._face_next():
                 self._fail_task('target_not_found')
         elif search.phase in ('climb', 'descend') and self._arrived():
             search.phase, search.swept_rad = 'sweep', 0.0
@@ -742,6 +739,29 @@ class Mission:
             self._yaw_goal = search.face_yaw - 0.5 * search.turn_rad
             if abs(frames.wrap_angle(self._yaw_goal - self._yaw_ref)) < cfg.arrive_yaw_tol_rad:
                 search.phase, search.swept_rad = 'sweep', 0.0
+
+    def _next_level(self):
+        """Climb or descend to the next altitude to turn at, or as near it as the walls
+        seen let the tool's reach keep search_wall_clearance_m off them (a level that
+        leaves no room to move is passed over); False when no level is left."""
+        cfg, search = self.config, self._search
+        levels = self._search_altitudes_m()
+        p = self._ref_map()[0]
+        lo, hi = search.walls.altitudes_clear_of(
+            p, self.vehicle.tool_tip_x_m + cfg.search_wall_clearance_m)
+        while search.level + 1 < len(levels):
+            search.level += 1
+            # not further into a wall's reach than it already is
+            z = min(max(levels[search.level], min(lo, p[2])), max(hi, p[2]))
+            if abs(z - p[2]) <= cfg.arrive_tol_m:
+                continue
+            search.phase = 'climb' if z > p[2] else 'descend'
+            self._plan(np.array([p[0], p[1], z]), cfg.climb_speed_m_s)
+            self._event(('climbing' if search.phase == 'climb' else 'descending')
+                        + f' to search at {z:.2f} m'
+                        + ('' if z == levels[search.level] else ', clear of a wall'))
+            return True
+        return False
 
     def _face_next(self):
         """Fly to the next point to face the wall from (planned from the wall seen most

@@ -49,6 +49,20 @@ class Wall:
         along = (np.asarray(self.centroids) - origin) @ R[:, 0]
         return float(along.min()), float(along.max())
 
+    def altitudes_clear_of(self, p_map, reach_m):
+        """The altitudes (lo, hi) at which the horizontal circle of radius ``reach_m``
+        around ``p_map``'s vertical stays in front of this wall's plane: a wall leaning
+        over ``p_map`` nears as one climbs, one leaning away as one descends."""
+        n = self.normal_map
+        n_h = math.hypot(n[0], n[1])
+        # the plane's signed distance along n, less the reach's share of it, at p's altitude
+        spare_m = float((np.asarray(p_map) - self.point_map) @ n) - n_h * reach_m
+        if n[2] < 0.0:
+            return -math.inf, float(p_map[2] + spare_m / -n[2])
+        if n[2] > 0.0:
+            return float(p_map[2] - spare_m / n[2]), math.inf
+        return -math.inf, math.inf
+
     def face_points(self, standoff_m, altitude_m, spacing_m):
         """Points at ``altitude_m``, ``standoff_m`` out from the wall horizontally, in
         front of the two ends of its extent (one, in front of the middle, when they are
@@ -86,6 +100,13 @@ class WallMemory:
         wall.normals.append(n)
         wall.shares.append(float(share))
         return True
+
+    def altitudes_clear_of(self, p_map, reach_m):
+        """The altitudes (lo, hi) at which every wall is clear of ``reach_m`` around
+        ``p_map``'s vertical (:meth:`Wall.altitudes_clear_of`); lo > hi when none is."""
+        ranges = [w.altitudes_clear_of(p_map, reach_m) for w in self.walls]
+        return (max((r[0] for r in ranges), default=-math.inf),
+                min((r[1] for r in ranges), default=math.inf))
 
     def best(self):
         """The wall seen most, or None."""
