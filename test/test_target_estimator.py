@@ -225,3 +225,46 @@ def test_ground_truth_mode():
 def test_config_validation():
     with pytest.raises(ConfigError, match='gate_distance_m'):
         from_dict(TargetEstimatorConfig, {'gate_distance_m': -1.0})
+
+
+def _hovering_at(est, x_m, t0_s, t1_s):
+    """States of the vehicle hovering at (x_m, 0.2, 1.4), facing the wall (+x), from t0_s to
+    t1_s; returns a function giving what a perfect camera sees of ``p_map`` at time t."""
+    for k in range(int(round((t1_s - t0_s) * RATE_HZ)) + 1):
+        est.add_state(VehicleState(t0_s + k / RATE_HZ, np.array([x_m, 0.2, 1.4]),
+                                   np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), np.zeros(3)))
+    cam_map = (Pose(np.eye(3), np.array([x_m, 0.2, 1.4])) @ VEHICLE.camera_in_base()).inverse()
+    return lambda p_map: (cam_map.apply(p_map), cam_map.rotate(N_MAP))
+
+
+@pytest.mark.parametrize('draw', range(3))
+@pytest.mark.parametrize('case', ['nearer', 'look_alike', 'as_far'])
+def test_a_locked_estimate_is_refined_by_a_nearer_look_at_the_same_target_only(case, draw):
+    """A target confirmed from 2-3 m with an error of 8-18 cm in the wall's plane (under the
+    0.2 m distance gate, but many sigma of its confident estimate), then seen from half
+    that range or nearer: the nearer look replaces it once reacquire_n of its measurements
+    agree, even locked. A look-alike 0.45-1 m away, seen as near, or the same target seen
+    from as far as before, never does."""
+    rng = np.random.default_rng([np.random.SeedSequence().entropy, draw])
+    cfg = TargetEstimatorConfig()
+    est = _estimator(cfg)
+    far_m = rng.uniform(2.0, 3.0)
+    seen_far = _hovering_at(est, P_POI_MAP[0] - far_m, 0.0, 1.0)
+    off = rng.uniform(0.08, 0.18) * frames.unit([0.0, *rng.normal(size=2)])
+    for k in range(20):
+        assert est.add_measurement(0.02 + 0.03 * k, *seen_far(P_POI_MAP + off), None)
+    est.locked = True
+    near_m = far_m * (0.45 if case == 'nearer' or case == 'look_alike' else 1.0)
+    seen = _hovering_at(est, P_POI_MAP[0] - near_m, 1.1, 2.0)
+    truth = P_POI_MAP
+    if case == 'look_alike':
+        truth = P_POI_MAP + rng.uniform(0.45, 1.0) * frames.unit([0.0, *rng.normal(size=2)])
+    for k in range(cfg.reacquire_n):
+        assert not est.add_measurement(1.2 + 0.03 * k, *seen(truth), None)
+    if case == 'nearer':
+        assert est.counters['refined'] == 1 and est.counters['switch_refused'] == 0
+        assert np.linalg.norm(est.estimate().p_poi_map - truth) < 1e-6
+        assert est.add_measurement(1.6, *seen(truth), None)       # and tracks it from there
+    else:
+        assert est.counters['refined'] == 0 and est.counters['switch_refused'] == 1
+        assert np.linalg.norm(est.estimate().p_poi_map - (P_POI_MAP + off)) < 1e-6

@@ -24,6 +24,13 @@ from uav_tilt_control.site import HINT_ERROR_M
 # The first fix near a hint is taken within the hint's error on the diagonal plus this: the
 # vision estimate's own error (a few cm) and the POI's offset within the hinted object.
 HINT_MARGIN_M = 0.03
+# Vision's error grows with range (depth noise along the ray, a pixel's size on the wall),
+# and measurements from one place share it, so an estimate averaged from far looks is surer
+# of itself than it should be and gates out the nearer looks that would correct it. A run
+# of rejections taken from this fraction of the nearest range the estimate was measured
+# from, or nearer, within gate_distance_m of it (no other object fits there), is a better
+# look at the same object: it refines even a locked estimate.
+REFINE_RANGE_RATIO = 0.5
 
 
 @dataclasses.dataclass
@@ -68,18 +75,19 @@ class TargetEstimator:
         self._P = None              # position covariance of the estimate, m^2
         self._n_map = None
         self._stamp_s = None        # stamp of the last accepted measurement
-        self._rejected_run = []     # consecutive gated-out measurements in map
+        self._range_m = None        # the nearest range it was measured from (0: truth)
+        self._rejected_run = []     # consecutive gated-out measurements: (p_map, range_m)
         # Set by the mission: a locked target is never swapped for another object (a look-
         # alike); the first fix is taken near the hint (map) when there is one.
         self.locked = False
         self.hint_map = None
         self.counters = dict(accepted=0, rejected_gate=0, rejected_nonfinite=0,
                              rejected_no_pose=0, rejected_hint=0, no_target=0, reacquired=0,
-                             switch_refused=0)
+                             refined=0, switch_refused=0)
 
     def reset(self):
         """Forget the target estimate (a candidate the mission did not confirm)."""
-        self._p_map = self._P = self._n_map = self._stamp_s = None
+        self._p_map = self._P = self._n_map = self._stamp_s = self._range_m = None
         self._rejected_run = []
 
     def aim(self, hint_map):
@@ -166,10 +174,11 @@ class TargetEstimator:
                     > self.config.hint_radius_m:
                 self.counters['rejected_hint'] += 1
                 return False
-        _, n_cam, cov = checked[k]
+        p_cam, n_cam, cov = checked[k]
         n_map = frames.unit(map_cam.rotate(n_cam))
         cov = None if cov is None else np.asarray(cov, dtype=float).ravel()
-        return self._update(stamp_s, in_map[k], n_map, self._meas_cov_map(cov, map_cam.R))
+        return self._update(stamp_s, in_map[k], n_map, self._meas_cov_map(cov, map_cam.R),
+                            float(np.linalg.norm(p_cam)))
 
     @staticmethod
     def _finite(stamp_s, p_cam, n_cam, cov):
@@ -191,7 +200,7 @@ class TargetEstimator:
                 and math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) > 1e-9):
             self.counters['rejected_nonfinite'] += 1
             return False
-        self._reset(stamp_s, p_map, frames.unit(n_map), np.zeros((3, 3)))
+        self._reset(stamp_s, p_map, frames.unit(n_map), np.zeros((3, 3)), 0.0)
         self.counters['accepted'] += 1
         return True
 
@@ -227,10 +236,10 @@ class TargetEstimator:
         floor = np.eye(3) * self.config.meas_std_m ** 2
         return R_map_cam @ cov_cam @ R_map_cam.T + floor
 
-    def _update(self, stamp_s, p_map, n_map, R_meas):
+    def _update(self, stamp_s, p_map, n_map, R_meas, range_m):
         cfg = self.config
         if self._p_map is None:
-            self._reset(stamp_s, p_map, n_map, R_meas)
+            self._reset(stamp_s, p_map, n_map, R_meas, range_m)
             self.counters['accepted'] += 1
             return True
         dt = max(0.0, stamp_s - self._stamp_s)
@@ -241,9 +250,10 @@ class TargetEstimator:
         if (np.linalg.norm(r) > cfg.gate_distance_m or r @ np.linalg.solve(S, r) > cfg.gate_chi2
                 or angle > cfg.gate_angle_rad):
             self.counters['rejected_gate'] += 1
-            self._maybe_reacquire(stamp_s, p_map, n_map, R_meas)
+            self._maybe_reacquire(stamp_s, p_map, n_map, R_meas, range_m)
             return False
         self._rejected_run = []
+        self._range_m = min(self._range_m, range_m)
         K = P @ np.linalg.inv(S)
         self._p_map = self._p_map + K @ r
         self._P = (np.eye(3) - K) @ P
@@ -253,26 +263,29 @@ class TargetEstimator:
         self.counters['accepted'] += 1
         return True
 
-    def _maybe_reacquire(self, stamp_s, p_map, n_map, R_meas):
+    def _maybe_reacquire(self, stamp_s, p_map, n_map, R_meas, range_m):
         # a run of rejected measurements that agree with each other means the estimate is
-        # the outlier (wrong first lock, or the target moved): restart from them
-        run = self._rejected_run
-        if run and np.linalg.norm(p_map - run[-1]) > self.config.gate_distance_m:
+        # the outlier (wrong first lock, the target moved, or far looks): restart from them
+        cfg, run = self.config, self._rejected_run
+        if run and np.linalg.norm(p_map - run[-1][0]) > cfg.gate_distance_m:
             run.clear()
-        run.append(p_map)
-        if len(run) >= self.config.reacquire_n:
+        run.append((p_map, range_m))
+        if len(run) >= cfg.reacquire_n:
+            refines = (np.linalg.norm(p_map - self._p_map) <= cfg.gate_distance_m
+                       and max(r for _, r in run) <= REFINE_RANGE_RATIO * self._range_m)
             far_from_hint = self.hint_map is not None and np.linalg.norm(
-                p_map - self.hint_map) > self.config.hint_radius_m
-            if self.locked or far_from_hint:
+                p_map - self.hint_map) > cfg.hint_radius_m
+            if (self.locked or far_from_hint) and not refines:
                 # another object where the target was, or away from where it is said to
                 # be: a look-alike, never a switch
                 self.counters['switch_refused'] += 1
                 run.clear()
                 return
-            self._reset(stamp_s, p_map, n_map, R_meas)
-            self.counters['reacquired'] += 1
+            self._reset(stamp_s, p_map, n_map, R_meas, range_m)
+            self.counters['refined' if refines else 'reacquired'] += 1
 
-    def _reset(self, stamp_s, p_map, n_map, P):
+    def _reset(self, stamp_s, p_map, n_map, P, range_m):
+        self._range_m = float(range_m)
         self._p_map = np.array(p_map, dtype=float)
         self._n_map = np.array(n_map, dtype=float)
         self._P = np.array(P, dtype=float)
