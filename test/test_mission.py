@@ -969,6 +969,24 @@ def test_the_touch_alignment_can_be_turned_off():
     assert 'align' not in flight.phases
 
 
+def test_the_body_pitches_to_the_wall_at_the_pitch_rate_not_in_a_step():
+    # a fresh lean within the pitch limit and a fresh rate: the tool tip, 0.45 m ahead,
+    # swings with the reference, so the reference turns no faster than pitch_rate_rad_s
+    rng = np.random.default_rng()
+    lean, rate = rng.uniform(0.1, 0.45), rng.uniform(0.2, 1.0)
+    cfg = MissionConfig(pitch_rate_rad_s=rate)
+    normal = np.array([-np.cos(lean), 0.0, np.sin(lean)])
+    flight = Flight(cfg, TargetEstimate(P_POI, normal, 0.02, True))
+    assert flight.mission.inspect()[0]
+    flight.run_to(Mode.HOLD, timeout_s=120.0)
+    pitch = np.array([sp.pitch_rad for _, _, sp, _ in flight.log])
+    assert np.abs(np.diff(pitch)).max() <= rate * DT_S * (1 + 1e-9), (lean, rate)
+    # and the tool points along the normal before the approach ends
+    approach_end = max(i for i, (_, mode, _, _) in enumerate(flight.log)
+                       if mode == Mode.APPROACH)
+    assert pitch[approach_end] == pytest.approx(lean, abs=cfg.arrive_yaw_tol_rad)
+
+
 def test_the_tool_tip_meets_a_target_beyond_the_pitch_limit():
     # a wall leaning back further than the body may pitch: the tool stays 0.2 rad off the
     # normal, so the body stands off the normal (9 cm here) for the tool tip to meet the POI

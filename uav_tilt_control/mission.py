@@ -65,6 +65,9 @@ class MissionConfig:
     hover_speed_m_s: float = param(0.5, lo=0.05, hi=3.0)
     hover_settle_s: float = param(1.0, lo=0.0, hi=30.0)     # HOVER before SEARCH on inspect
     yaw_rate_rad_s: float = param(0.5, lo=0.05, hi=3.0)
+    # the body pitch that points the tool (pitch_to_normal) turns no faster than this: a
+    # step would swing the tool tip 0.45 m ahead by up to 0.2 m at the attitude loop's speed
+    pitch_rate_rad_s: float = param(0.5, lo=0.05, hi=3.0)
     # SEARCH: a full turn at the takeoff altitude, one more search_climb_m higher (a wider
     # view of a tall wall) and one more search_descend_m lower (the camera looks level and
     # sees 23 degrees down: a low target on a near wall lies below the image), until a
@@ -318,7 +321,7 @@ class Mission:
         self._traj = None
         self._yaw_ref = 0.0
         self._yaw_goal = 0.0
-        self._pitch = 0.0
+        self._pitch_goal = self._pitch_ref = 0.0
         self._tool_shift_t = np.zeros(3)   # TargetFrame.tool_shift_t while frame t is worked in
         self._contact_gains = False
         self._inspect_pending = False
@@ -583,7 +586,7 @@ class Mission:
             view = look - task.hint_map
             self._yaw_goal = frames.yaw_facing(view, default_rad=self._yaw_ref)
             pitch = frames.pitch_facing(view) if cfg.pitch_to_normal else 0.0
-            self._pitch = min(max(pitch, -cfg.max_pitch_rad), cfg.max_pitch_rad)
+            self._pitch_goal = min(max(pitch, -cfg.max_pitch_rad), cfg.max_pitch_rad)
         else:
             self._enter(Mode.SEARCH)
 
@@ -836,7 +839,8 @@ class Mission:
         total, n = self._approach_f_n
         self._approach_f_n = (total + f_n * f_n, n + 1)
         yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
-        if self._arrived() and abs(yaw_err) < self.config.arrive_yaw_tol_rad:
+        turned = max(abs(yaw_err), abs(self._pitch_goal - self._pitch_ref))
+        if self._arrived() and turned < self.config.arrive_yaw_tol_rad:
             if not self._check_target_lost():
                 self._enter(Mode.CONTACT)
         elif self._overdue():
@@ -1048,7 +1052,7 @@ class Mission:
         p0 = self._ref_map()[0]
         self._plan(np.array([p0[0], p0[1], cfg.ground_z_m]), rate)
         self._yaw_goal = self._yaw_ref
-        self._pitch = 0.0
+        self._pitch_goal = 0.0
 
     def _tick_land(self, target, f_n, stale):
         cfg = self.config
@@ -1186,7 +1190,7 @@ class Mission:
             self._target_frame = TargetFrame(key, R_map_t, origin_map, pitch, shift_t)
         frame = self._target_frame
         self._R_map_t, self._origin_map = frame.R_map_t, frame.origin_map
-        self._pitch, self._tool_shift_t = frame.pitch_rad, frame.tool_shift_t
+        self._pitch_goal, self._tool_shift_t = frame.pitch_rad, frame.tool_shift_t
 
     def _track_target(self, target):
         # the segment lives in frame t, so a refined estimate moves the whole reference
@@ -1254,6 +1258,8 @@ class Mission:
         err = frames.wrap_angle(self._yaw_goal - self._yaw_ref)
         step = cfg.yaw_rate_rad_s * dt
         self._yaw_ref = frames.wrap_angle(self._yaw_ref + min(max(err, -step), step))
+        step = cfg.pitch_rate_rad_s * dt
+        self._pitch_ref += min(max(self._pitch_goal - self._pitch_ref, -step), step)
         p, v, a = self._sample()
         if self._mode == Mode.CONTACT and self._contact_phase == 'press':
             # a quasi-static press: with the reference's own speed in C e' + M e'' the push
@@ -1267,7 +1273,7 @@ class Mission:
         return ImpedanceSetpoint(
             R_map_t=self._R_map_t.copy(), origin_map=self._origin_map.copy(),
             lambda_d_t=p + self._tool_shift_t, dlambda_d_t=v, ddlambda_d_t=a,
-            yaw_rad=self._yaw_ref, pitch_rad=self._pitch,
+            yaw_rad=self._yaw_ref, pitch_rad=self._pitch_ref,
             contact_gains=self._contact_gains or releasing,
             tangential_feedforward=self._mode == Mode.SLIDE,
             airborne=self._mode not in _NEAR_GROUND)
