@@ -694,8 +694,7 @@ class Mission:
                     # in HOVER a task runs only in transit to its target: look from here
                     self._enter(Mode.SEARCH, 'searching from where it backed off')
         elif self._flight_phase == 'transit':
-            yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
-            if self._arrived() and abs(yaw_err) < cfg.arrive_yaw_tol_rad:
+            if self._arrived() and self._turned():
                 self._flight_phase = ''
                 self._enter(Mode.SEARCH)
             elif self._overdue():
@@ -838,9 +837,7 @@ class Mission:
         self._track_target(target)
         total, n = self._approach_f_n
         self._approach_f_n = (total + f_n * f_n, n + 1)
-        yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
-        turned = max(abs(yaw_err), abs(self._pitch_goal - self._pitch_ref))
-        if self._arrived() and turned < self.config.arrive_yaw_tol_rad:
+        if self._arrived() and self._turned():
             if not self._check_target_lost():
                 self._enter(Mode.CONTACT)
         elif self._overdue():
@@ -1245,6 +1242,12 @@ class Mission:
         p_t = frames.to_frame(self._R_map_t, self._origin_map, self._state.p_map)
         return (np.linalg.norm(p_t - self._tool_shift_t - self._traj.p1) < cfg.arrive_tol_m
                 and np.linalg.norm(self._v_map) < cfg.arrive_speed_m_s)
+
+    def _turned(self):
+        """Whether the body faces its yaw goal and the pitch reference has reached its goal."""
+        yaw_err = frames.wrap_angle(self._yaw_goal - _yaw_of(self._state))
+        return max(abs(yaw_err), abs(self._pitch_goal - self._pitch_ref)) < (
+            self.config.arrive_yaw_tol_rad)
 
     def _setpoint(self):
         cfg = self.config
