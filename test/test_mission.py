@@ -26,12 +26,18 @@ PERFECT = TargetEstimate(P_POI, NORMAL, 0.02, True)
 
 
 class Flight:
-    """Mission + perfect tracker + wall + ground, stepped at DT_S."""
+    """Mission + perfect tracker + wall + ground, stepped at DT_S.
 
-    def __init__(self, config=None, target=PERFECT):
+    ``target``: what vision reports each tick (:meth:`seen`); ``wall``: (a point on it, its
+    normal, how far from that point it reaches), by default the target's, within 1 m;
+    ``plan``: the mission's plan.
+    """
+
+    def __init__(self, config=None, target=PERFECT, plan=None, wall=None):
         self.config = config or MissionConfig()
         self.target = target
-        self.mission = Mission(VEHICLE, self.config)
+        self.wall = wall or (target.p_poi_map, target.normal_map, 1.0)
+        self.mission = Mission(VEHICLE, self.config, plan=plan)
         self.t_s = 0.0
         self.p = np.array([0.0, 0.0, GEAR_Z_M])
         self.v = np.zeros(3)
@@ -40,19 +46,27 @@ class Flight:
         self.modes = [Mode.IDLE]
         self.log = []
         self.phases = []        # the mission's phase at each logged tick
+        self.forces = []        # the simulated F/T reading at each logged tick
+        self.attitudes = []     # the vehicle's attitude (quaternion) at each logged tick
         self.step()
 
     def state(self):
         return VehicleState(self.t_s, self.p.copy(), self.q.copy(), self.v.copy(), np.zeros(3))
 
+    def seen(self):
+        """The target vision reports this tick."""
+        return self.target
+
     def step(self, target='default', force_n=None, odom_age_s=0.0, f_map=None):
-        """One tick; ``force_n`` overrides the simulated F/T reading, ``f_map`` gives its
-        whole force on the vehicle (map)."""
-        target = self.target if target == 'default' else target
+        """One tick; ``target`` overrides :meth:`seen`, ``force_n`` the simulated F/T
+        reading; ``f_map`` gives its whole force on the vehicle (map)."""
+        target = self.seen() if target == 'default' else target
         f = self.force_n if force_n is None else force_n
         sp = self.mission.update(self.t_s, self.state(), target, f, odom_age_s, f_map)
         self.log.append((self.t_s, self.mission.mode, sp, self.p.copy()))
         self.phases.append(self.mission.phase)
+        self.forces.append(self.force_n)
+        self.attitudes.append(self.q.copy())
         if self.mission.mode != self.modes[-1]:
             self.modes.append(self.mission.mode)
         self._track(sp)
@@ -63,9 +77,9 @@ class Flight:
         p = sp.origin_map + sp.R_map_t @ sp.lambda_d_t
         v = sp.R_map_t @ sp.dlambda_d_t
         self.force_n = 0.0
-        p_poi, normal = self.target.p_poi_map, self.target.normal_map
-        gap = (p - p_poi) @ normal - VEHICLE.tool_tip_x_m
-        if gap < 0.0 and np.linalg.norm(p - p_poi) < 1.0:
+        point, normal, reach_m = self.wall
+        gap = (p - point) @ normal - VEHICLE.tool_tip_x_m
+        if gap < 0.0 and np.linalg.norm(p - point) < reach_m:
             p = p - gap * normal
             v = v - (v @ normal) * normal
             if sp.contact_gains:
@@ -87,7 +101,7 @@ class Flight:
                 return p
         raise AssertionError(f'{f_map} N held: no reaction in {before}')
 
-    def run_until(self, predicate, timeout_s, **kw):
+    def run_until(self, predicate, timeout_s=400.0, **kw):
         t_end = self.t_s + timeout_s
         while not predicate(self):
             assert self.t_s < t_end, f'timed out in {self.mission.mode}'

@@ -1,25 +1,20 @@
-"""The mission as a plan executor, driven by a synthetic perfect tracker (as test_mission):
-the vehicle is where the setpoint puts it, except that a flat wall stops the tool tip, and
-pushed against it with contact gains it measures the impedance spring K_z times the depth.
-Each touch's target is seen by vision (or never, where a test says so)."""
+"""The mission as a plan executor, flown by test_mission's Flight (a synthetic perfect
+tracker): the vehicle is where the setpoint puts it, except that a flat wall stops the tool
+tip, and pushed against it with contact gains it measures the impedance spring K_z times the
+depth. Each touch's target is seen by vision (or never, where a test says so)."""
 import inspect
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from uav_tilt_common.state import VehicleState
-from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import mission as mission_module
-from uav_tilt_control.mission import MODES, Mission, MissionConfig, Mode
+from uav_tilt_control.mission import MODES, MissionConfig, Mode
 from uav_tilt_control.plan import Slide, Touch
 from uav_tilt_control.target_estimator import TargetEstimate
-from test_mission import touch_ticks
+from test_mission import DT_S, VEHICLE, Flight, touch_ticks
 
-DT_S = 0.01
-VEHICLE = VehicleParams()
 TIP = VEHICLE.tool_tip_x_m
-GEAR_Z_M = 0.1
 WALL_X_M = 3.0
 NORMAL = np.array([-1.0, 0.0, 0.0])                 # out of the wall, towards the start
 TARGETS = {'a': np.array([WALL_X_M, 0.5, 1.4]), 'b': np.array([WALL_X_M, -0.6, 1.8])}
@@ -33,72 +28,33 @@ def _plan(slide_first=False):
     return [slide, *touches] if slide_first else [*touches, slide]
 
 
-class PlanFlight:
-    """Mission + perfect tracker + wall + ground; ``unseen``: targets vision never finds;
-    ``yaw_error_rad``: added to the odometry's yaw while sliding (a tool swung aside)."""
+class PlanFlight(Flight):
+    """test_mission's Flight flying a plan, against a flat wall that reaches everywhere;
+    ``unseen``: targets vision never finds; ``yaw_error_rad``: added to the odometry's yaw
+    while sliding (a tool swung aside)."""
 
     def __init__(self, plan, config=None, unseen=(), yaw_error_rad=0.0):
-        self.config = config or MissionConfig(search_timeout_s=4.0)
-        self.mission = Mission(VEHICLE, self.config, plan=plan)
         self.unseen, self.yaw_error_rad = set(unseen), yaw_error_rad
-        self.t_s = 0.0
-        self.p, self.v = np.array([0.0, 0.0, GEAR_Z_M]), np.zeros(3)
-        self.q = np.array([0.0, 0.0, 0.0, 1.0])
-        self.force_n = 0.0
-        self.force_override = None
-        self.f_map = None       # the F/T's whole force on the vehicle (map), when given
-        self.log = []       # (t, mode, phase, setpoint, p, force, q)
-        self.step()
+        super().__init__(config or MissionConfig(search_timeout_s=4.0), target=None, plan=plan,
+                         wall=(TARGETS['a'], NORMAL, np.inf))
 
-    def target(self):
+    def seen(self):
         task = self.mission.task
         if task is None or task.kind != 'touch' or task.target in self.unseen:
             return None
         return TargetEstimate(TARGETS[task.target], NORMAL, 0.02, True)
 
-    def step(self):
-        q = self.q
+    def state(self):
+        state = super().state()
         if self.mission.mode == Mode.SLIDE and self.yaw_error_rad:
-            q = (Rotation.from_euler('z', self.yaw_error_rad) * Rotation.from_quat(q)).as_quat()
-        state = VehicleState(self.t_s, self.p.copy(), q, self.v.copy(), np.zeros(3))
-        force = self.force_n if self.force_override is None else self.force_override
-        sp = self.mission.update(self.t_s, state, self.target(), force, 0.0, self.f_map)
-        self.log.append((self.t_s, self.mission.mode, self.mission.phase, sp, self.p.copy(),
-                         self.force_n, self.q.copy()))
-        self._track(sp)
-        self.t_s += DT_S
-
-    def _track(self, sp):
-        p = sp.origin_map + sp.R_map_t @ sp.lambda_d_t
-        v = sp.R_map_t @ sp.dlambda_d_t
-        self.q = Rotation.from_euler('ZY', [sp.yaw_rad, sp.pitch_rad]).as_quat()
-        self.force_n = 0.0
-        gap = (p - TARGETS['a']) @ NORMAL - TIP       # the tip's distance from the wall
-        if gap < 0.0:
-            p, v = p - gap * NORMAL, v - (v @ NORMAL) * NORMAL
-            if sp.contact_gains:
-                self.force_n = -gap * self.mission.k_contact_z_n_per_m
-        if p[2] < GEAR_Z_M:
-            p[2], v = GEAR_Z_M, np.zeros(3)
-        self.p, self.v = p, v
-
-    def run_until(self, predicate, timeout_s=400.0):
-        t_end = self.t_s + timeout_s
-        while not predicate(self):
-            assert self.t_s < t_end, f'timed out in {self.mission.mode}'
-            self.step()
+            state.q_map_base = (Rotation.from_euler('z', self.yaw_error_rad)
+                                * Rotation.from_quat(state.q_map_base)).as_quat()
+        return state
 
     def fly(self):
         assert self.mission.inspect()[0]
         self.run_until(lambda f: f.mission.mode == Mode.IDLE and f.t_s > 1.0)
         return self
-
-    def modes(self):
-        out = []
-        for _, mode, *_ in self.log:
-            if not out or out[-1] != mode:
-                out.append(mode)
-        return out
 
 
 def test_a_plan_runs_two_touches_and_a_slide_in_order():
@@ -108,16 +64,16 @@ def test_a_plan_runs_two_touches_and_a_slide_in_order():
     assert status['success'] and status['inspection_completed'], mission.records
     assert status['task_outcomes'] == 'ok,ok,ok' and status['task_count'] == 3
     touch = [Mode.SEARCH, Mode.APPROACH, Mode.CONTACT, Mode.HOLD, Mode.RETREAT]
-    assert flight.modes() == [Mode.IDLE, Mode.TAKEOFF, Mode.HOVER, *touch, Mode.HOVER, *touch,
-                              Mode.APPROACH, Mode.CONTACT, Mode.SLIDE, Mode.RETREAT, Mode.LAND,
-                              Mode.IDLE]
+    assert flight.modes == [Mode.IDLE, Mode.TAKEOFF, Mode.HOVER, *touch, Mode.HOVER, *touch,
+                            Mode.APPROACH, Mode.CONTACT, Mode.SLIDE, Mode.RETREAT, Mode.LAND,
+                            Mode.IDLE]
     records = mission.records
     assert [r.success for r in records] == [True, True, True]
     plan = mission.plan
     for task, record in zip(plan[:2], records[:2]):
         start, end = record.t_contact_s
         assert end - start == pytest.approx(task.hold_s, abs=2 * DT_S)
-        held = [f for t, mode, _, _, _, f, _ in flight.log if start <= t < end]
+        held = [f for (t, *_), f in zip(flight.log, flight.forces) if start <= t < end]
         # the push of each task is its own: K_z times the depth from its force
         assert np.mean(held[10:]) == pytest.approx(task.force_n, rel=1e-3)
     # before each touch it flew (HOVER 'transit') to look at where the plan says the target
@@ -126,10 +82,10 @@ def test_a_plan_runs_two_touches_and_a_slide_in_order():
               if flight.log[k][1] == Mode.SEARCH and flight.log[k - 1][1] != Mode.SEARCH]
     assert len(starts) == 2
     for k, task in zip(starts, plan[:2]):
-        assert flight.log[k - 1][2] == 'transit'
+        assert flight.phases[k - 1] == 'transit'
         look = task.hint_map + NORMAL * flight.config.look_distance_m
-        np.testing.assert_allclose(flight.log[k][4], look, atol=flight.config.arrive_tol_m)
-        x_tool = Rotation.from_quat(flight.log[k][6]).apply([1.0, 0.0, 0.0])
+        np.testing.assert_allclose(flight.log[k][3], look, atol=flight.config.arrive_tol_m)
+        x_tool = Rotation.from_quat(flight.attitudes[k]).apply([1.0, 0.0, 0.0])
         assert x_tool @ -NORMAL > np.cos(flight.config.arrive_yaw_tol_rad)
 
 
@@ -145,7 +101,7 @@ def test_the_camera_looks_at_the_hint_when_the_search_starts(inclination_deg, hi
     flight = PlanFlight([Touch('a', hint, normal, 5.0, 1.0)], unseen={'a'})
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.mission.mode == Mode.SEARCH)
-    _, _, _, _, p_map, _, q = flight.log[-1]
+    p_map, q = flight.log[-1][3], flight.attitudes[-1]
     config = flight.config
     assert p_map[2] >= config.ground_z_m + 2.0 * config.land_detect_height_m - 1e-9
     cam = VEHICLE.camera_in_base()
@@ -162,21 +118,22 @@ def test_the_slide_follows_its_line_with_the_push_and_the_friction_feedforward()
     slide = flight.mission.plan[2]
     record = flight.mission.records[2]
     start, end = record.t_contact_s
-    ticks = [entry for entry in flight.log if start <= entry[0] < end]
-    assert all(e[1] == Mode.SLIDE for e in ticks)
+    ticks = [(*entry, f, q) for entry, f, q in zip(flight.log, flight.forces, flight.attitudes)
+             if start <= entry[0] < end]
+    assert all(mode == Mode.SLIDE for _, mode, *_ in ticks)
     # tool tip of the vehicle (where the setpoint put it) against the line
     tips = np.array([p + Rotation.from_quat(q).apply([TIP, 0.0, 0.0])
-                     for _, _, _, _, p, _, q in ticks])
+                     for _, _, _, p, _, q in ticks])
     assert np.abs(tips[:, 1] - LINE[0, 1]).max() < 1e-6
     assert np.abs((tips - LINE[0]) @ NORMAL).max() < 1e-9         # on the surface
     assert tips[0, 2] == pytest.approx(LINE[0, 2], abs=1e-6)
     assert tips[-1, 2] == pytest.approx(LINE[1, 2], abs=1e-3)
-    speeds = np.array([np.linalg.norm(sp.R_map_t @ sp.dlambda_d_t) for _, _, _, sp, *_ in ticks])
+    speeds = np.array([np.linalg.norm(sp.R_map_t @ sp.dlambda_d_t) for _, _, sp, *_ in ticks])
     assert speeds.max() == pytest.approx(slide.speed_m_s, rel=1e-6)
     assert np.array([f for *_, f, _ in ticks])[5:] == pytest.approx(slide.force_n, rel=1e-3)
     # compliant along the normal, friction fed forward exactly while sliding
-    assert all(sp.contact_gains and sp.tangential_feedforward for _, _, _, sp, *_ in ticks)
-    assert not any(sp.tangential_feedforward for _, mode, _, sp, *_ in flight.log
+    assert all(sp.contact_gains and sp.tangential_feedforward for _, _, sp, *_ in ticks)
+    assert not any(sp.tangential_feedforward for _, mode, sp, _ in flight.log
                    if mode != Mode.SLIDE)
     # 1 m at 0.1 m/s, plus the speed-up and slow-down (each half as long at the cruise speed)
     assert end - start == pytest.approx(1.0 / 0.1 + 1.875 * 0.1 / flight.config.slide_accel_m_s2,
@@ -191,7 +148,7 @@ def test_a_target_never_seen_fails_its_task_and_the_plan_goes_on():
     status = flight.mission.status
     assert status['task_outcomes'] == 'target_not_found,ok,ok'
     assert not status['success'] and status['failsafe_reason'] == 'target_not_found'
-    modes = flight.modes()
+    modes = flight.modes
     assert modes[:5] == [Mode.IDLE, Mode.TAKEOFF, Mode.HOVER, Mode.SEARCH, Mode.HOVER]
     assert Mode.SLIDE in modes and modes[-2:] == [Mode.LAND, Mode.IDLE]
 
@@ -201,7 +158,7 @@ def test_a_tool_swung_off_the_line_fails_the_slide_which_lifts_off():
     records = flight.mission.records
     assert (records[0].success, records[0].reason) == (False, 'off_line')
     assert [r.success for r in records[1:]] == [True, True]
-    after = flight.modes()
+    after = flight.modes
     assert after[after.index(Mode.SLIDE) + 1] == Mode.RETREAT
 
 
@@ -209,14 +166,12 @@ def test_the_force_limit_ends_the_plan():
     flight = PlanFlight(_plan())
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.mission.mode == Mode.HOLD)
-    flight.force_override = flight.config.force_limit_n + 1.0
-    flight.step()
-    flight.force_override = None
+    flight.step(force_n=flight.config.force_limit_n + 1.0)
     flight.run_until(lambda f: f.mission.mode == Mode.IDLE)
     records = flight.mission.records
     assert [(r.success, r.reason) for r in records] == [
         (False, 'force_limit'), (False, 'not_run'), (False, 'not_run')]
-    assert flight.modes()[-4:] == [Mode.HOLD, Mode.RETREAT, Mode.LAND, Mode.IDLE]
+    assert flight.modes[-4:] == [Mode.HOLD, Mode.RETREAT, Mode.LAND, Mode.IDLE]
 
 
 def test_abort_stops_the_plan_and_hovers():
@@ -236,13 +191,11 @@ def test_a_transit_that_meets_a_wall_backs_off_and_searches_from_there():
     flight.run_until(lambda f: f.mission.phase == 'transit' and f.mission.task.target == 'b'
                      and np.linalg.norm(f.v) > 0.2)
     push = np.array([-0.4, 1.5, 0.0])
-    flight.f_map = push
     for _ in range(touch_ticks(cfg, push, DT_S)):
         p0 = flight.p.copy()
-        flight.step()
+        flight.step(f_map=push)
         if flight.mission.phase == 'clear':
             break
-    flight.f_map = None
     assert flight.mission.phase == 'clear'
     flight.run_until(lambda f: f.mission.mode == Mode.SEARCH, 20.0)
     # searched from where it backed off, not from the look point
@@ -280,8 +233,6 @@ def test_one_noisy_force_reading_is_not_the_wall():
     flight = PlanFlight(_plan())
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.mission.phase == 'close')
-    flight.force_override = flight.config.touch_threshold_n + 0.5
-    flight.step()
-    flight.force_override = None
+    flight.step(force_n=flight.config.touch_threshold_n + 0.5)
     flight.run_until(lambda f: f.mission.phase != 'close')
     assert flight.mission.phase == 'touch'
