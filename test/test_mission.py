@@ -962,6 +962,27 @@ def test_a_gust_near_the_wall_backs_the_tool_out_while_the_touch_waits():
     flight.run_to(Mode.HOLD, timeout_s=30.0)
 
 
+def test_a_wall_felt_while_the_tool_is_off_the_target_is_not_pressed_on():
+    # a soft wall takes seconds of light contact to pass the touch threshold; a gust that
+    # swings the tip off the target then must not be pinned there by the press's friction
+    cfg = MissionConfig()
+    rng = np.random.default_rng()
+    off_m, angle = rng.uniform(1.5, 5.0) * cfg.touch_align_m, rng.uniform(0.0, 2 * np.pi)
+    flight = _touching_with_offset(cfg, off_m * np.array([0.0, np.cos(angle), np.sin(angle)]),
+                                   clearance_m=0.0)
+    flight.run_until(lambda f: f.mission.phase == 'align', 2.0)
+    felt_n = flight.mission._touch_threshold_n() + 0.5
+    for _ in range(3 * cfg.contact_detect_ticks):
+        flight.step(force_n=felt_n)
+    assert flight.mission.phase == 'align'
+    # the gust over, the tool is over the target: the same push now starts the press
+    flight._track = Flight._track.__get__(flight)
+    flight.run_until(lambda f: f.mission.phase == 'touch', 2.0)
+    for _ in range(cfg.contact_detect_ticks):
+        flight.step(force_n=felt_n)
+    assert flight.mission.phase == 'press'
+
+
 def _touch_s(cfg, offset_m):
     """Seconds from the creep's start to the press, the body held ``offset_m`` above its
     reference (in the wall's plane)."""

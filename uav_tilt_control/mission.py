@@ -871,7 +871,9 @@ class Mission:
             self._align_touch()
             self.first_touch_peak_n = max(self.first_touch_peak_n, f_n)
             self._contact_ticks = self._contact_ticks + 1 if f_n > self._touch_threshold_n() else 0
-            if self._contact_ticks >= cfg.contact_detect_ticks:
+            # a wall felt while the tip is off the target is not pressed on (friction would
+            # hold the tip there): the creep backs out until the tip is over it again
+            if self._contact_ticks >= cfg.contact_detect_ticks and not self._aligning:
                 self._start_press()
             elif self._traj.done(self._now_s):
                 self._fail_task('no_contact')
