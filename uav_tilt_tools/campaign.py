@@ -270,11 +270,12 @@ class Interrupted(KeyboardInterrupt):
 
 
 def summarize(n, seed, target_source, runs, corners=False):
-    """The campaign JSON of its ``runs`` (by index)."""
-    successes = sum(r['success'] for r in runs)
+    """The campaign JSON of its ``runs`` (by index): a success is a run that met the
+    inspection bar (no ``failure``)."""
+    successes = sum(r['failure'] is None for r in runs)
     low, high = wilson_interval(successes, n)
     failures = collections.Counter(f"{r['failure']['reason']} in {r['failure']['mode']}"
-                                   for r in runs if not r['success'])
+                                   for r in runs if r['failure'] is not None)
     return dict(n=n, seed=seed, target_source=target_source, corners=corners,
                 successes=successes,
                 success_rate=successes / n if n else 0.0, success_rate_ci95=[low, high],

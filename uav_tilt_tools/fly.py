@@ -22,6 +22,7 @@ from uav_tilt_control.controller_core import ControllerConfig, plan_of
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.site_params import site_overrides
+from uav_tilt_tools.task_metrics import missed_bar
 
 # a whole search (mission.search_timeout_s) and an inspection after it
 DURATION_S = 210.0
@@ -66,7 +67,7 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
     result['controller_rate_hz'] = result['ticks'] / wall_s
     if vision is not None:
         result['vision_fps'] = vision.frames / wall_s
-    result['failure'] = None if result['success'] else failure_of(result)
+    result['failure'] = failure_of(result)
     return result
 
 
@@ -79,8 +80,14 @@ def check_plan(scenario, plan_file, overrides=None):
 
 
 def failure_of(result):
-    """Why a run failed, as {'reason', 'mode', 'phase'}: the failsafe that ended it and
-    where it fired, else what kept it from completing."""
+    """Why a run missed the inspection bar, as {'reason', 'mode', 'phase'}, or None when it
+    met it: the failsafe that ended it and where it fired, else what kept it from
+    completing; for a run the controller completed, the first touch that the truth puts
+    off the bar (:func:`task_metrics.missed_bar`, in HOLD)."""
+    if result['success']:
+        missed = [missed_bar(t) for t in result.get('tasks') or ()]
+        reason = next((m for m in missed if m), None)
+        return reason and {'reason': reason, 'mode': Mode.HOLD.value, 'phase': ''}
     reason = result.get('failsafe_reason')
     where = result.get('failsafe_where') or {}
     failed = [t for t in result.get('tasks', ()) if not t['success'] and t['reason']]
@@ -142,7 +149,7 @@ def _run(args):
         return 2
     result = fly(scenario, args.target_source, overrides, args.duration)
     print(json.dumps(result, default=jsonable))
-    return 0 if result['success'] else 1
+    return 0 if result['failure'] is None else 1
 
 
 def jsonable(value):

@@ -19,6 +19,13 @@ import numpy as np
 
 from uav_tilt_control import frames
 
+# The inspection bar (DESIGN section 7): over the hold, the true tool tip within 1 cm of the
+# point of interest along the surface, and the push within 0.1 N mean and 0.2 N RMS of the
+# task's force.
+POI_BAR_M = 0.01
+FORCE_MEAN_BAR_N = 0.1
+FORCE_RMS_BAR_N = 0.2
+
 
 def task_results(tasks, t_s, tip_map, force_map, targets=None, wall_normal_map=None):
     """One dict per task.
@@ -48,6 +55,22 @@ def task_results(tasks, t_s, tip_map, force_map, targets=None, wall_normal_map=N
                                 normal))
         out.append(entry)
     return out
+
+
+def missed_bar(task):
+    """Why a touch the controller completed misses the inspection bar by the truth:
+    'off_target' (the tool tip pressed elsewhere, such as on a look-alike) or
+    'force_off_setpoint'; None when it meets it, or where there is nothing to judge (a
+    slide, a touch without ground truth)."""
+    if task['kind'] != 'touch':
+        return None
+    if task['poi_error_max_m'] is not None and task['poi_error_max_m'] > POI_BAR_M:
+        return 'off_target'
+    mean_n, rms_n = task['force_mean_n'], task['force_rms_error_n']
+    if mean_n is not None and (abs(mean_n - task['force_setpoint_n']) > FORCE_MEAN_BAR_N
+                               or rms_n > FORCE_RMS_BAR_N):
+        return 'force_off_setpoint'
+    return None
 
 
 def pushing(task, t_s):
