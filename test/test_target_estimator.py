@@ -152,6 +152,39 @@ def test_a_hint_takes_its_target_at_the_stated_error_and_not_a_look_alike(sign):
     assert est.counters['rejected_hint'] == 1 and est.estimate() is None
 
 
+def test_a_look_alike_fixed_first_gives_way_to_the_target_nearer_the_hint_until_locked():
+    """Both plates within the hint's radius, the look-alike alone in the first frame (the
+    target missed there): once vision sees both, the target, nearer the hint, replaces it;
+    after the lock the estimate never moves to the other. As vision sends them: the tracked
+    candidate (the look-alike) alone, all of them first in every detector frame."""
+    rng = np.random.default_rng()
+    u, v = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])    # the wall's axes in map
+    cfg = TargetEstimatorConfig()
+    while True:
+        error = rng.uniform(-HINT_ERROR_M, HINT_ERROR_M, 2)
+        hint = P_POI_MAP + error[0] * u + error[1] * v
+        angle = rng.uniform(0.0, 2.0 * np.pi)
+        look_alike = hint + rng.uniform(0.0, cfg.hint_radius_m) * (
+            np.cos(angle) * u + np.sin(angle) * v)
+        apart_m = np.linalg.norm(look_alike - P_POI_MAP)
+        if (np.linalg.norm(look_alike - hint) > np.linalg.norm(error) + 0.05
+                and apart_m > cfg.gate_distance_m):
+            break
+    for locked in (False, True):
+        est = _estimator(cfg)
+        _fill(est, 1.0)
+        est.aim(hint)
+        assert est.add_measurement(0.1, *_measurement_at(0.1, p_map=look_alike), None)
+        est.locked = locked
+        for k in range(3 * cfg.reacquire_n):
+            t = 0.2 + 0.02 * k
+            seen = (look_alike, P_POI_MAP) if k % 5 == 4 else (look_alike,)
+            est.add_candidates(t, [(*_measurement_at(t, p_map=p), None) for p in seen])
+        kept = look_alike if locked else P_POI_MAP
+        assert np.linalg.norm(est.estimate().p_poi_map - kept) < 1e-6, (error, apart_m)
+        assert est.counters['reacquired'] == (0 if locked else 1)
+
+
 def test_nonfinite_rejected():
     est = _estimator()
     _fill(est, 1.0)

@@ -150,8 +150,10 @@ class TargetEstimator:
         in the camera optical frame, vision's tracked one first; returns True when one was
         accepted.
 
-        The one nearest the estimate is taken; before the first fix, the one nearest the
-        hint within ``hint_radius_m``, or without a hint vision's first.
+        The one nearest the hint is taken until the mission locks the target (the first fix
+        only within ``hint_radius_m`` of it; another object nearer the hint than the
+        estimate replaces it), then the one nearest the estimate; without a hint, the one
+        nearest the estimate, or before the first fix vision's first.
         """
         if not candidates:
             self.counters['no_target'] += 1
@@ -166,7 +168,10 @@ class TargetEstimator:
             return False
         map_cam = pose @ self._camera_in_base
         in_map = [map_cam.apply(c[0]) for c in checked]
-        reference = self._p_map if self._p_map is not None else self.hint_map
+        # Unlocked, the hint decides: the candidate nearest it is taken
+        reference = self._p_map
+        if self.hint_map is not None and (reference is None or not self.locked):
+            reference = self.hint_map
         k = 0
         if reference is not None:
             k = int(np.argmin([np.linalg.norm(p - reference) for p in in_map]))
@@ -177,8 +182,27 @@ class TargetEstimator:
         p_cam, n_cam, cov = checked[k]
         n_map = frames.unit(map_cam.rotate(n_cam))
         cov = None if cov is None else np.asarray(cov, dtype=float).ravel()
-        return self._update(stamp_s, in_map[k], n_map, self._meas_cov_map(cov, map_cam.R),
-                            float(np.linalg.norm(p_cam)))
+        R_meas, range_m = self._meas_cov_map(cov, map_cam.R), float(np.linalg.norm(p_cam))
+        if self._nearer_the_hint(in_map[k]):
+            # A look-alike fixed first (the target missed in that frame, both within the
+            # radius) gives way at once: vision tracks the first and sends the others only
+            # in its detector frames, so no run of rejections would ever build up.
+            self._reset(stamp_s, in_map[k], n_map, R_meas, range_m)
+            self.counters['reacquired'] += 1
+            return True
+        return self._update(stamp_s, in_map[k], n_map, R_meas, range_m)
+
+    def _nearer_the_hint(self, p_map):
+        """Whether ``p_map``, unlocked, is another object than the estimate's (outside the
+        gate), within the hint's radius and nearer the hint than the estimate by more than
+        vision's error (HINT_MARGIN_M)."""
+        if self.locked or self.hint_map is None or self._p_map is None:
+            return False
+        cfg, hint = self.config, self.hint_map
+        distance_m = np.linalg.norm(p_map - hint)
+        return bool(np.linalg.norm(p_map - self._p_map) > cfg.gate_distance_m
+                    and distance_m <= cfg.hint_radius_m
+                    and distance_m < np.linalg.norm(self._p_map - hint) - HINT_MARGIN_M)
 
     @staticmethod
     def _finite(stamp_s, p_cam, n_cam, cov):
