@@ -92,3 +92,25 @@ def test_the_missions_controller_earns_the_reward_its_touch_metrics_imply():
         assert implied > 0.5 * hold_ticks / base.ticks_per_step, metrics
     finally:
         env.close()
+
+
+def test_a_hold_completed_off_the_point_is_a_failure():
+    """An agent that holds the tool a fresh 2-8 cm along the wall from the POI lets the
+    controller complete its hold, but the truth puts the tip past the 1 cm bar: the episode
+    ends 'off_target', with the failure penalty."""
+    rng = np.random.default_rng()
+    env = gym.make(gym_env.ENV_ID)
+    try:
+        _, info = env.reset(seed=int(rng.integers(0, 2**31 - 1)))
+        cfg = env.unwrapped.cfg
+        offset_m = rng.uniform(0.02, 0.08)
+        action = np.array([offset_m / cfg.max_offset_m, 0.0, 0.0], dtype=np.float32)
+        while True:
+            _, reward, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                break
+        assert env.unwrapped.flight.status.get('inspection_completed'), info
+        assert info['outcome'] == 'off_target', (info, offset_m)
+        assert reward < 1.0 - cfg.failure_penalty
+    finally:
+        env.close()

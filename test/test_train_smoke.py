@@ -259,6 +259,33 @@ def test_cli_continued_run_keeps_its_lineage(data8, tmp_path):
     assert load_model(model).meta['total_epochs'] == 2
 
 
+def test_a_model_is_trained_at_its_own_input_size(data8, tmp_path):
+    """A given model (a pruned or resized one) is fed inputs of its ``img_size``, whatever
+    ``img_size`` says; the CLI's --img-size resizes an --init model and keeps its weights."""
+    from uav_tilt_vision import vision_cli
+    small = tmp_path / 'small.pt'
+    train(data8, small, epochs=1, seed=0, batch=4, width_mult=0.125, img_size=(256, 192),
+          device='cpu', log=lambda s: None)
+    model = load_model(small)
+    seen = []
+    model.register_forward_pre_hook(lambda m, x: seen.append(tuple(x[0].shape[2:])))
+    train(data8, tmp_path / 'again.pt', epochs=1, seed=0, batch=4, model=model, device='cpu',
+          log=lambda s: None)
+    assert seen and set(seen) == {(192, 256)}
+    big = tmp_path / 'big.pt'
+    args = ['train', '--data', str(data8), '--init', str(small), '--img-size', '384', '288',
+            '--out', str(big), '--epochs', '1', '--batch', '4', '--device', 'cpu', '--workers',
+            '1']
+    assert vision_cli.main(args) == 0
+    card = json.loads(card_path(big).read_text())
+    assert (card['img_size'], card['resized_from']) == ([384, 288], [256, 192])
+    assert load_model(big).img_size == (384, 288)
+    torch.testing.assert_close(load_model(big).anchors, load_model(small).anchors)
+    with pytest.raises(SystemExit) as stop:
+        vision_cli.main(['train', '--data', str(data8), '--img-size', '400', '300'])
+    assert stop.value.code == 2
+
+
 def test_grown_model_adds_a_finer_head_and_keeps_the_others(data8, tmp_path):
     from uav_tilt_vision import vision_cli
     three = tmp_path / 'three.pt'

@@ -23,7 +23,7 @@ from uav_tilt_sim.visuals import Scene
 from uav_tilt_vision import dataset, vision_cli
 from uav_tilt_vision.backends import load_detector
 from uav_tilt_vision.compress import size_stats
-from uav_tilt_vision.detector import Detector, load_model
+from uav_tilt_vision.detector import Detector, load_model, resize_input
 from uav_tilt_vision.metrics import bootstrap, mean_ap, percentile_interval
 from uav_tilt_vision.pipeline import VisionPipeline
 from uav_tilt_vision.target_pose import CameraIntrinsics
@@ -144,6 +144,17 @@ def test_goals_at_every_mission_range(mission):
         assert got['small_ap50'] >= SMALL_AP50_GOAL, (mission['seed'], model, got)
         for key in SUMMARY_KEYS:
             assert got[key] >= fp32[key] - INT8_BUDGET, (mission['seed'], model, key, got)
+
+
+def test_the_fp32_model_resized_to_a_larger_input_finds_what_it_found(heldout):
+    """``resize_input`` keeps weights and anchors: magnified 1.47x, the 320x256 model's boxes
+    grow with the objects, and its mAP@0.5 on the draw is not rejected as lower (anchors
+    scaled with the input would make every box 1.47x too large: mAP@0.5 about 0.25)."""
+    model = resize_input(load_model(FP32), (480, 352))
+    assert model.img_size == (480, 352)
+    torch.testing.assert_close(model.anchors, load_model(FP32).anchors)
+    magnified = {'rows': predict_set(model, heldout['dir']), 'groups': heldout['fp32']['groups']}
+    assert interval(magnified, 'map50', minus=heldout['fp32'])[1] >= 0.0
 
 
 def test_int8_quantization_loses_at_most_one_point(draw):

@@ -22,7 +22,7 @@ from uav_tilt_control.controller_core import ControllerConfig, plan_of
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.site_params import site_overrides
-from uav_tilt_tools.task_metrics import missed_bar
+from uav_tilt_tools.task_metrics import first_missed_bar
 
 # a whole search (mission.search_timeout_s) and an inspection after it
 DURATION_S = 210.0
@@ -85,8 +85,7 @@ def failure_of(result):
     completing; for a run the controller completed, the first touch that the truth puts
     off the bar (:func:`task_metrics.missed_bar`, in HOLD)."""
     if result['success']:
-        missed = [missed_bar(t) for t in result.get('tasks') or ()]
-        reason = next((m for m in missed if m), None)
+        reason = first_missed_bar(result.get('tasks'))
         return reason and {'reason': reason, 'mode': Mode.HOLD.value, 'phase': ''}
     reason = result.get('failsafe_reason')
     where = result.get('failsafe_where') or {}

@@ -46,7 +46,9 @@ along the surface, as the mission's metrics measure both), and a step's reward i
 over its ticks; so an episode's return is (HOLD ticks / ticks per step) times one minus
 the mission's (force_rms_error_n / force_scale_n)^2 and poi_error_m / poi_scale_m.
 
-**Termination**: the hold completed (success); a failsafe of the mission (force limit, no
+**Termination**: the hold completed: success when it met the inspection bar by the truth
+(:func:`uav_tilt_tools.task_metrics.missed_bar`), else a failure, ``off_target`` or
+``force_off_setpoint``; a failsafe of the mission (force limit, no
 contact, target lost, stale odometry, upset), the contact lost in HOLD, a push above the force
 limit, the vehicle below ``ground_clearance_m`` near the wall or tilted past
 ``max_tilt_deg``: each a failure, rewarded ``-failure_penalty``. Truncation after
@@ -260,8 +262,10 @@ class ContactInspectionEnv(gym.Env):
         """None while the touch goes on, else 'success' or what ended it."""
         flight, cfg = self.flight, self.cfg
         status = flight.status
-        if status.get('inspection_completed'):
-            return 'success'
+        if status.get('inspection_completed'):   # judged on the truth, as the campaign does
+            from uav_tilt_tools.inprocess import mission_result
+            from uav_tilt_tools.task_metrics import first_missed_bar
+            return first_missed_bar(mission_result(flight)['tasks']) or 'success'
         if status.get('failsafe_reason'):
             return status['failsafe_reason']
         if status.get('contact_lost'):

@@ -73,6 +73,11 @@ def missed_bar(task):
     return None
 
 
+def first_missed_bar(tasks):
+    """The :func:`missed_bar` reason of the first of ``tasks`` that misses the bar, or None."""
+    return next((m for m in map(missed_bar, tasks or ()) if m), None)
+
+
 def pushing(task, t_s):
     """Samples of the task's HOLD or SLIDE: start <= t < end (the end of the data while it
     had not ended)."""

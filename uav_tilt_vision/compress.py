@@ -138,13 +138,14 @@ def compress(model_path: str | os.PathLike[str], data_dir: str | os.PathLike[str
              seed: int = 0, calib_images: int = 128,
              eval_dir: str | os.PathLike[str] | None = None, lr: float = 1e-3,
              crop: Sequence[int] | None = None, distill_gain: float = 1.0,
-             bf16: bool = False, log: Callable[[str], Any] = print) -> dict[str, Any]:
+             bf16: bool = False, device: str = 'auto', workers: int = 0,
+             log: Callable[[str], Any] = print) -> dict[str, Any]:
     """fp32 ``.pt`` -> ``detector_pruned.pt`` (+ card) and ``detector_int8.onnx`` (+ card).
 
     Returns a report with params, MACs and (with ``eval_dir``) mAP of every stage.
     ``crop``: fine-tune on object-centred windows (see ``train.train``).
     ``distill_gain``: weight of the distillation from the unpruned model (0: labels only).
-    ``bf16``: the fine-tuning's forward passes in bfloat16 autocast (see ``train.train``).
+    ``bf16``, ``device``, ``workers``: the fine-tuning's (see ``train.train``).
     ``log``: receives the fine-tuning's per-epoch lines.
     """
     out = Path(out_dir)
@@ -157,8 +158,8 @@ def compress(model_path: str | os.PathLike[str], data_dir: str | os.PathLike[str
     pruned = prune(model, ratio)
     teacher = load_model(model_path) if distill_gain else None
     card = train(data_dir, pruned_path, finetune_epochs, seed, lr=lr, model=pruned,
-                 eval_dir=eval_dir, device='cpu', crop=crop, teacher=teacher,
-                 distill_gain=distill_gain, bf16=bf16, log=log,
+                 eval_dir=eval_dir, device=device, workers=workers, crop=crop,
+                 teacher=teacher, distill_gain=distill_gain, bf16=bf16, log=log,
                  card_extra={'source': str(model_path), 'pruning_ratio': ratio,
                              'teacher': str(model_path) if teacher else None})
     report['pruned'] = {**size_stats(pruned), 'path': str(pruned_path),

@@ -237,6 +237,16 @@ def grow_scales(model: Detector, scales: int, extra_anchors: ArrayLike) -> Detec
     return grown
 
 
+def resize_input(model: Detector, img_size: Sequence[int]) -> Detector:
+    """A copy of ``model`` that takes ``img_size`` (w, h) inputs. Weights and anchors are
+    kept: the network is fully convolutional, and an object magnified in the input looks
+    larger to it, so its boxes grow with the object in input pixels as the anchors do."""
+    resized = Detector(model.num_classes, model.width_mult, model.channels(),
+                       model.anchors.cpu().numpy(), img_size, len(model.strides))
+    resized.load_state_dict(model.state_dict())
+    return resized
+
+
 def save_model(path: str | os.PathLike[str], model: Detector,
                meta: dict[str, Any] | None = None) -> None:
     """Save architecture config, weights and a JSON-like ``meta`` dict to ``path``.

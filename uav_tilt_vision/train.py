@@ -81,7 +81,8 @@ def train(data_dir: str | os.PathLike[str], out_path: str | os.PathLike[str], ep
     ``anchors`` None = k-means on the training labels (defaults when too few boxes).
     ``scales``: detection heads of a new model (2: YOLOv3-tiny, 3: its stride-8 variant).
     ``model``: fine-tune this model (e.g. a pruned one) instead of a new one; it keeps its
-    anchors and ``width_mult``, ``anchors`` and ``scales`` are then unused.
+    anchors and input size, and ``width_mult``, ``img_size``, ``anchors`` and ``scales`` are
+    then unused.
     ``crop`` (w, h): train on object-centred windows of the input (``yolo_data.random_crop``).
     ``hsv``: hue, saturation and value jitter of the augmentation.
     ``eval_dir``: optional YOLO-format set evaluated at the end (metrics go in the card).
@@ -100,6 +101,8 @@ def train(data_dir: str | os.PathLike[str], out_path: str | os.PathLike[str], ep
     random.seed(seed)
     dev = resolve_device(device)
     torch.backends.cudnn.benchmark = False
+    if model is not None:
+        img_size = model.img_size
     ds = YoloDataset(data_dir, img_size, augment=augment, hflip=hflip, seed=seed,
                      crop=crop if augment else None, hsv=tuple(hsv))
     meta = read_meta(data_dir)

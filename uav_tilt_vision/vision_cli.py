@@ -25,11 +25,14 @@ def _dataset(a):
 
 
 def _train(a):
-    from uav_tilt_vision.detector import load_model
+    from uav_tilt_vision.detector import IMG_SIZE, load_model, resize_input
     from uav_tilt_vision.train import card_path, grown, train
     from uav_tilt_vision.yolo_data import HSV_GAINS
     extra: dict[str, Any] = {'teacher': a.teacher} if a.teacher else {}
     model = load_model(a.init) if a.init else None
+    if model is not None and a.img_size and tuple(a.img_size) != model.img_size:
+        extra['resized_from'] = list(model.img_size)
+        model = resize_input(model, a.img_size)
     if model is not None and a.grow_scales:   # main() refuses --grow-scales without --init
         extra['grown_from_scales'] = len(model.strides)
         model = grown(model, a.grow_scales, a.data)
@@ -41,6 +44,7 @@ def _train(a):
         extra['total_epochs'] = a.epochs + prior.get('total_epochs', prior['epochs'])
         extra.update({k: prior[k] for k in ('source', 'pruning_ratio') if k in prior})
     card = train(a.data, a.out, a.epochs, a.seed, a.width_mult, batch=a.batch, lr=a.lr,
+                 img_size=a.img_size or IMG_SIZE, workers=a.workers,
                  device=a.device, eval_dir=a.eval_data, crop=a.crop, scales=a.scales,
                  hsv=a.hsv or HSV_GAINS,
                  model=model, teacher=load_model(a.teacher) if a.teacher else None,
@@ -60,7 +64,7 @@ def _compress(a):
     from uav_tilt_vision.compress import compress
     return compress(a.model, a.data, a.out_dir, a.ratio, a.finetune_epochs, a.seed,
                     a.calib_images, a.eval_data, crop=a.crop, distill_gain=a.distill_gain,
-                    bf16=a.bf16, log=log_stderr)
+                    bf16=a.bf16, device=a.device, workers=a.workers, log=log_stderr)
 
 
 def _quantize(a):
@@ -100,6 +104,10 @@ def parser() -> argparse.ArgumentParser:
                    help='detection heads: 2 = YOLOv3-tiny, 3 = with a stride-8 head, '
                         '4 = and a stride-4 head')
     t.add_argument('--batch', type=int, default=16)
+    t.add_argument('--img-size', type=int, nargs=2, metavar=('W', 'H'),
+                   help='network input, multiples of 32 (default detector.IMG_SIZE; with '
+                        '--init: that model\'s, or this one, weights and anchors kept)')
+    t.add_argument('--workers', type=int, default=0, help='data loader processes')
     t.add_argument('--lr', type=float, default=3e-3)
     t.add_argument('--device', default='auto')
     t.add_argument('--eval-data', help='held-out set whose mAP goes in the model card')
@@ -145,6 +153,8 @@ def parser() -> argparse.ArgumentParser:
                         'weight (0: labels only)')
     c.add_argument('--bf16', action='store_true',
                    help='bfloat16 autocast for the fine-tuning\'s forward passes')
+    c.add_argument('--device', default='auto', help='fine-tuning device (auto: a GPU if any)')
+    c.add_argument('--workers', type=int, default=0, help='data loader processes')
     c.set_defaults(run=_compress)
     q = sub.add_parser('quantize', help='int8 ONNX of a pruned model only (compress step 3)')
     q.add_argument('--model', default=f'{MODELS}/detector_pruned.pt')
@@ -174,6 +184,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if getattr(a, 'grow_scales', None) and not a.init:
         ap.error('--grow-scales needs --init (the model to grow)')
+    if getattr(a, 'img_size', None) and any(v <= 0 or v % 32 for v in a.img_size):
+        ap.error(f'--img-size must be positive multiples of 32, got {a.img_size}')
     if getattr(a, 'distance_m', None) and not 0.0 < a.distance_m[0] <= a.distance_m[1]:
         ap.error(f'--distance-m must be 0 < MIN <= MAX, got {a.distance_m}')
     if getattr(a, 'bootstrap', 0) < 0:
