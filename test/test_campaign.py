@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from uav_tilt_tools import campaign as cp
-from uav_tilt_tools.fly import failure_of
+from uav_tilt_tools.task_metrics import failure_of
 from uav_tilt_tools.task_metrics import POI_BAR_M, task_results
 
 

@@ -217,6 +217,7 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
     assert summary['force_mean_n'] == pytest.approx(4.0, abs=0.1)
     assert summary['force_rms_error_n'] <= 0.2
     assert summary['poi_error_m'] < 0.01 and summary['contact_lost'] == 0
+    assert summary['failure'] is None      # the inspection bar, by the recorded truth
     print(f'recorded {duration_s:.2f} s of sim time ({len(set(clock))} of {ticks} ticks), '
           f'camera {counts} of {frames_published}; summary {summary}')
 

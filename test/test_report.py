@@ -64,11 +64,11 @@ def plant_statuses(t_end, rtf):
         for t in np.arange(0.0, t_end, 0.5)]
 
 
-def synthetic_recording(push_n, contact_force_n=6.0):
-    """Vehicle facing +x with its tool tip at POI + TIP_OFFSET, pushing ``push_n[k]``; the
-    controller was asked for ``contact_force_n``."""
+def synthetic_recording(push_n, contact_force_n=6.0, tip_offset=TIP_OFFSET):
+    """Vehicle facing +x with its tool tip at POI + ``tip_offset``, pushing ``push_n[k]``;
+    the controller was asked for ``contact_force_n``."""
     t = np.arange(N) * DT
-    p_body = POI + TIP_OFFSET - np.array([TOOL_X, 0.0, 0.0])
+    p_body = POI + tip_offset - np.array([TOOL_X, 0.0, 0.0])
     rec = {names.GROUND_TRUTH_ODOM: [], names.EE_WRENCH: [], names.CLOCK: []}
     for k, tk in enumerate(t):
         state = VehicleState(tk, p_body, np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3),
@@ -115,6 +115,34 @@ def test_force_and_poi_metrics_are_exact_over_hold():
     assert summary['rtf'] == pytest.approx(0.5, abs=1e-9)
     assert summary['controller_rate_hz'] == pytest.approx(298.5)
     assert set(summary) == set(report.SUMMARY_KEYS)
+    # completed, but 5 cm from the point of interest by the truth
+    assert summary['failure'] == {'reason': 'off_target', 'mode': 'HOLD', 'phase': ''}
+
+
+def test_failure_judges_the_recorded_run_on_the_truth_as_the_campaign_does():
+    """summary.json ``failure`` is null only for a completed run within the inspection bar:
+    the tip within 1 cm of the POI, the push within 0.1 N mean and 0.2 N RMS of the
+    setpoint; a failsafe is named with the mode it fired in."""
+    rng = np.random.default_rng()
+    angle = rng.uniform(0.0, 2.0 * math.pi)
+    along_wall = np.array([0.0, math.cos(angle), math.sin(angle)])
+    steady = np.full(N, 6.0 + rng.uniform(-0.09, 0.09))
+    rec, _ = synthetic_recording(steady, tip_offset=along_wall * rng.uniform(0.0, 0.0095))
+    assert report.summarize(rec, TOOL_X)['failure'] is None
+    rec, _ = synthetic_recording(steady, tip_offset=along_wall * rng.uniform(0.0105, 0.1))
+    assert report.summarize(rec, TOOL_X)['failure']['reason'] == 'off_target'
+    rec, _ = synthetic_recording(steady + rng.choice([-1.0, 1.0]) * rng.uniform(0.11, 1.0),
+                                 tip_offset=np.zeros(3))
+    assert report.summarize(rec, TOOL_X)['failure']['reason'] == 'force_off_setpoint'
+    # the force limit trips in HOLD at 1.0 s: not completed, whatever the touch measured
+    base = controller_status(6.0)
+    rec[names.CONTROLLER_STATUS] = [
+        (wall_ns(tc), status(tc, base, mode=mode.value, phase='', success=False,
+                             failsafe_reason='force_limit' if tc > 1.0 else ''))
+        for tc, mode in [(0.3, Mode.CONTACT), (HOLD_FIRST, Mode.HOLD), (1.0, Mode.HOLD),
+                         (1.2, Mode.RETREAT), (1.9, Mode.IDLE)]]
+    assert report.summarize(rec, TOOL_X)['failure'] == {
+        'reason': 'force_limit', 'mode': 'HOLD', 'phase': ''}
 
 
 @pytest.mark.parametrize('asked_n', [4.0, 7.5])
@@ -158,6 +186,8 @@ def test_vision_rate_and_latency_come_from_vision_status():
 def test_missing_topics_give_nulls_and_no_plots(tmp_path):
     summary = report.summarize({}, TOOL_X)
     assert set(summary) == set(report.SUMMARY_KEYS)
+    # without the controller's status the run is not shown to have completed
+    assert summary.pop('failure') == {'reason': 'not_completed', 'mode': 'none', 'phase': ''}
     assert all(v is None for v in summary.values())
     assert write_plots({}, str(tmp_path), TOOL_X) == []
 

@@ -17,16 +17,15 @@ import numpy as np
 import yaml
 
 from uav_tilt_common.config import ConfigError, from_dict
-from uav_tilt_common.modes import Mode
 from uav_tilt_control.controller_core import ControllerConfig, plan_of
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.site_params import site_overrides
-from uav_tilt_tools.task_metrics import first_missed_bar
+from uav_tilt_tools.task_metrics import failure_of
 
 # a whole search (mission.search_timeout_s) and an inspection after it
 DURATION_S = 210.0
-__all__ = ['DURATION_S', 'check_plan', 'failure_of', 'fly', 'jsonable', 'register',
+__all__ = ['DURATION_S', 'check_plan', 'fly', 'jsonable', 'register',
            'site_overrides']
 
 
@@ -77,30 +76,6 @@ def check_plan(scenario, plan_file, overrides=None):
     overrides = {**(overrides or {}), **site_overrides(scenario), 'plan_file': plan_file}
     plan_of(from_dict(ControllerConfig, overrides))
     return overrides
-
-
-def failure_of(result):
-    """Why a run missed the inspection bar, as {'reason', 'mode', 'phase'}, or None when it
-    met it: the failsafe that ended it and where it fired, else what kept it from
-    completing; for a run the controller completed, the first touch that the truth puts
-    off the bar (:func:`task_metrics.missed_bar`, in HOLD)."""
-    if result['success']:
-        reason = first_missed_bar(result.get('tasks'))
-        return reason and {'reason': reason, 'mode': Mode.HOLD.value, 'phase': ''}
-    reason = result.get('failsafe_reason')
-    where = result.get('failsafe_where') or {}
-    failed = [t for t in result.get('tasks', ()) if not t['success'] and t['reason']]
-    if not reason and failed:
-        mode = Mode.HOLD if failed[0]['kind'] == 'touch' else Mode.SLIDE
-        reason, where = failed[0]['reason'], {'mode': mode.value, 'phase': ''}
-    if not reason:
-        if result.get('contact_lost'):
-            reason = 'contact_lost'
-            where = {'mode': Mode.HOLD.value, 'phase': ''}
-        else:
-            last = result['mode_history'][-1][1] if result.get('mode_history') else 'none'
-            reason, where = 'not_completed', {'mode': last, 'phase': ''}
-    return {'reason': reason, 'mode': where.get('mode'), 'phase': where.get('phase')}
 
 
 def _overrides(pairs):

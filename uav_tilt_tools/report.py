@@ -21,10 +21,10 @@ from uav_tilt_common import names
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_tools import recording
 from uav_tilt_tools.mission_metrics import MISSION_KEYS, json_number, mission_summary
-from uav_tilt_tools.task_metrics import task_results, with_tasks
+from uav_tilt_tools.task_metrics import failure_of, task_results, with_tasks
 
 RUN_KEYS = ('rtf', 'controller_rate_hz', 'vision_fps', 'vision_latency_ms_p95')
-SUMMARY_KEYS = MISSION_KEYS + RUN_KEYS + ('tasks',)
+SUMMARY_KEYS = MISSION_KEYS + RUN_KEYS + ('tasks', 'failure')
 
 
 def register(sub):
@@ -81,8 +81,26 @@ def summarize(rec, tool_tip_x_m):
         vision_fps=vision_last.get('fps'),
         vision_latency_ms_p95=vision_last.get('latency_ms_p95'))
     with_tasks(summary, task_summaries(rec, tool_tip_x_m))
-    return {k: summary[k] if k in MISSION_KEYS + ('tasks',) else json_number(summary[k])
-            for k in SUMMARY_KEYS}
+    summary['failure'] = recorded_failure(summary, ctrl)
+    return {k: summary[k] if k in MISSION_KEYS + ('tasks', 'failure')
+            else json_number(summary[k]) for k in SUMMARY_KEYS}
+
+
+def recorded_failure(summary, ctrl):
+    """summary.json ``failure``: why the recorded run missed the inspection bar, judged on
+    the truth as the in-process runs are (:func:`task_metrics.failure_of`), or None. Without
+    a recorded plan the mission's one touch is judged on the summary's own keys; a failsafe
+    is placed in the mode and phase of the last status before it."""
+    fired = next((i for i, (_, v) in enumerate(ctrl) if v.get('failsafe_reason')), None)
+    before = ctrl[max(0, fired - 1)][1] if fired is not None else {}
+    touch = {'kind': 'touch', 'success': bool(summary['success']), 'reason': '',
+             **{k: summary[k] for k in ('poi_error_max_m', 'force_mean_n', 'force_setpoint_n',
+                                        'force_rms_error_n')}}
+    return failure_of({
+        **summary, 'tasks': summary['tasks'] if summary['tasks'] is not None else [touch],
+        'failsafe_reason': ctrl[fired][1]['failsafe_reason'] if fired is not None else '',
+        'failsafe_where': {'mode': before.get('mode'), 'phase': before.get('phase', '')},
+        'mode_history': recording.modes(ctrl)})
 
 
 def task_summaries(rec, tool_tip_x_m):

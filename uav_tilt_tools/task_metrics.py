@@ -17,6 +17,7 @@ The push is the contact force along the wall's outward normal (positive pushing)
 """
 import numpy as np
 
+from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
 
 # The inspection bar (DESIGN section 7): over the hold, the true tool tip within 1 cm of the
@@ -76,6 +77,30 @@ def missed_bar(task):
 def first_missed_bar(tasks):
     """The :func:`missed_bar` reason of the first of ``tasks`` that misses the bar, or None."""
     return next((m for m in map(missed_bar, tasks or ()) if m), None)
+
+
+def failure_of(result):
+    """Why a run missed the inspection bar, as {'reason', 'mode', 'phase'}, or None when it
+    met it: the failsafe that ended it and where it fired, else what kept it from
+    completing; for a run the controller completed, the first touch that the truth puts
+    off the bar (:func:`missed_bar`, in HOLD)."""
+    if result['success']:
+        reason = first_missed_bar(result.get('tasks'))
+        return reason and {'reason': reason, 'mode': Mode.HOLD.value, 'phase': ''}
+    reason = result.get('failsafe_reason')
+    where = result.get('failsafe_where') or {}
+    failed = [t for t in result.get('tasks', ()) if not t['success'] and t['reason']]
+    if not reason and failed:
+        mode = Mode.HOLD if failed[0]['kind'] == 'touch' else Mode.SLIDE
+        reason, where = failed[0]['reason'], {'mode': mode.value, 'phase': ''}
+    if not reason:
+        if result.get('contact_lost'):
+            reason = 'contact_lost'
+            where = {'mode': Mode.HOLD.value, 'phase': ''}
+        else:
+            last = result['mode_history'][-1][1] if result.get('mode_history') else 'none'
+            reason, where = 'not_completed', {'mode': last, 'phase': ''}
+    return {'reason': reason, 'mode': where.get('mode'), 'phase': where.get('phase')}
 
 
 def pushing(task, t_s):
