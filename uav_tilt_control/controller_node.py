@@ -30,6 +30,7 @@ from std_srvs.srv import Trigger
 from uav_tilt_common import cdr, modes, names, ros_msgs, ros_qos
 from uav_tilt_common.config import nested, param
 from uav_tilt_common.rate_limit import RejectCounter
+from uav_tilt_common.recorder_hold import recorder_listens
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.vehicle import VehicleParams
@@ -250,8 +251,7 @@ class ControllerNode(Node):
         """hold_until_recorded: let the autostart go once the recorder subscribes to
         controller/status (other subscribers, a probe or a viewer, do not count), or the
         wait is over."""
-        infos = self.get_subscriptions_info_by_topic(self.pub_status.topic_name)
-        if any(info.node_name == names.RECORDER_NODE for info in infos):
+        if recorder_listens(self, self.pub_status):
             self.core.autostart_held = False
         elif time.monotonic() - self.wall_t0 >= names.RECORDER_WAIT_S:
             self.core.autostart_held = False

@@ -28,6 +28,7 @@ from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
 from uav_tilt_common import cdr, names, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
+from uav_tilt_common.recorder_hold import recorder_listens
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.state import ActuatorCommand
@@ -62,8 +63,8 @@ class PlantNodeConfig(PlantCoreConfig):
     camera_enabled: bool = param(True, doc='render and publish the RGB-D camera')
     status_rate_hz: float = param(2.0, lo=0.1, hi=50.0, doc='plant/status rate (wall clock)')
     hold_until_recorded: bool = param(
-        False, doc='lockstep: keep the first tick until every plant topic has a matched '
-        'subscription (a recorder of all of them), at most 30 s of wall time')
+        False, doc='lockstep: keep the first tick until the recorder\'s subscription to every '
+        'topic a tick publishes is matched, at most 30 s of wall time')
     summary_file: str = param('', doc="one JSON line with the run's timing, written at exit")
 
 
@@ -180,15 +181,15 @@ class PlantNode(Node):
         self._advance()
 
     def _recorded(self):
-        """hold_until_recorded: whether every topic a tick publishes has a matched
-        subscription, or the wait is over."""
+        """hold_until_recorded: whether the recorder listens to every topic a tick
+        publishes, or the wait is over."""
         if not self.holding:
             return True
         pubs = [self.pub_clock, self.pub_imu, self.pub_odom, self.pub_wrench, self.pub_act,
                 self.pub_gt_odom]
         if self.cfg.camera_enabled:
             pubs += [self.pub_rgb, self.pub_depth, self.pub_info]
-        if all(pub.get_subscription_count() for pub in pubs):
+        if all(recorder_listens(self, pub) for pub in pubs):
             return True
         if time.monotonic() - self.wall_t0 < names.RECORDER_WAIT_S:
             return False
