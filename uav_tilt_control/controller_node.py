@@ -30,8 +30,8 @@ from std_srvs.srv import Trigger
 from uav_tilt_common import cdr, modes, names, ros_msgs, ros_qos
 from uav_tilt_common.config import nested, param
 from uav_tilt_common.rate_limit import RejectCounter
-from uav_tilt_common.recorder_hold import recorder_listens
 from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_common.ros_recorder import recorder_listens
 from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore

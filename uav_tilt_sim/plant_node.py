@@ -28,8 +28,8 @@ from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
 from uav_tilt_common import cdr, names, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
-from uav_tilt_common.recorder_hold import recorder_listens
 from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_common.ros_recorder import recorder_listens
 from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.state import ActuatorCommand
 from uav_tilt_sim.command_check import check_command

@@ -10,7 +10,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from uav_tilt_common import names, ros_qos
-from uav_tilt_common.recorder_hold import recorder_listens
+from uav_tilt_common.ros_recorder import recorder_listens
 
 SIM_TIME = [Parameter('use_sim_time', value=True)]
 # Discovery on localhost takes well under a second; a missing match is waited for this long.
