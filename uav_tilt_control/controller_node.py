@@ -248,9 +248,9 @@ class ControllerNode(Node):
 
     # --- status -------------------------------------------------------------------------
     def _release_autostart(self):
-        """hold_until_recorded: let the autostart go once the recorder subscribes to
-        controller/status (other subscribers, a probe or a viewer, do not count), or the
-        wait is over."""
+        """hold_until_recorded: let the autostart go once the recorder listens to
+        controller/status (its subscription matched; other subscribers, a probe or a
+        viewer, do not count), or the wait is over."""
         if recorder_listens(self, self.pub_status):
             self.core.autostart_held = False
         elif time.monotonic() - self.wall_t0 >= names.RECORDER_WAIT_S:
