@@ -273,6 +273,20 @@ def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, cap
     assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
 
 
+@pytest.mark.parametrize('content, why', [(None, 'no *.mcap in'),
+                                          (b'garbage', 'is not an MCAP file'),
+                                          (b'', 'is not an MCAP file')])
+def test_a_folder_without_an_mcap_recording_is_refused_with_one_line(tmp_path, capsys,
+                                                                     content, why):
+    """Bad input: exit 2, one line on stderr, no summary (unlike a file torn at its end)."""
+    if content is not None:
+        (tmp_path / 'recording.mcap').write_bytes(content)
+    assert report.run(argparse.Namespace(run_dir=str(tmp_path))) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith('uav-tilt report: ') and why in err and err.count('\n') == 1
+    assert out == '' and not (tmp_path / 'summary.json').exists()
+
+
 def _plan_message(tasks):
     from std_msgs.msg import String
     return String(data=json.dumps({'tasks': tasks, 'wall': None}))

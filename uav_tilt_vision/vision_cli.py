@@ -8,6 +8,9 @@ import json
 import sys
 from typing import Any, Sequence
 
+from uav_tilt_common import resources
+from uav_tilt_common.config import ConfigError
+
 MODELS = 'models'
 
 
@@ -55,7 +58,7 @@ def _train(a):
 def _eval(a):
     from uav_tilt_vision.backends import load_detector
     from uav_tilt_vision.train import evaluate
-    det = load_detector(a.model, a.backend)
+    det = load_detector(resources.resolve(a.model, '--model'), a.backend)
     return {**evaluate(det, a.data, resamples=a.bootstrap), 'model': a.model,
             'backend_used': det.backend}
 
@@ -74,7 +77,7 @@ def _quantize(a):
 
 def _profile(a):
     from uav_tilt_vision.profile import report
-    return report(a.model)
+    return report(resources.resolve(m, '--model') for m in a.model)
 
 
 def parser() -> argparse.ArgumentParser:
@@ -179,7 +182,8 @@ def register(sub: 'argparse._SubParsersAction[Any]') -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Parse ``argv``, run the sub-command, print its JSON result; returns 0."""
+    """Parse ``argv``, run the sub-command, print its JSON result; returns 0, or 2 with one
+    line on stderr when a file or folder it reads is missing."""
     ap = parser()
     a = ap.parse_args(argv)
     if getattr(a, 'grow_scales', None) and not a.init:
@@ -193,7 +197,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if a.threads:
         import torch
         torch.set_num_threads(a.threads)
-    print(json.dumps(a.run(a), indent=2))
+    try:
+        result = a.run(a)
+    except (FileNotFoundError, ConfigError) as err:     # bad input, not a bug: no traceback
+        print(f'{ap.prog}: error: {err}', file=sys.stderr)
+        return 2
+    print(json.dumps(result, indent=2))
     return 0
 
 
