@@ -103,7 +103,8 @@ def test_the_installed_copy_runs_and_finds_its_files_in_share(workspace):
     assert module.startswith(prefix)        # the installed copy, not the source tree
     assert source == 'None' and share == str(prefix_of(workspace) / 'share' / 'uav_tilt')
     for shipped in ('config/plant.yaml', 'config/scenarios/default.yaml',
-                    'models/detector_int8.onnx', 'models/detector_int8.json'):
+                    'config/plans/inspection.yaml', 'models/detector_int8.onnx',
+                    'models/detector_int8.json'):
         assert (prefix_of(workspace) / 'share' / 'uav_tilt' / shipped).is_file(), shipped
     assert (prefix_of(workspace) / 'share' / 'ament_index' / 'resource_index' / 'packages'
             / 'uav_tilt').is_file()

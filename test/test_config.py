@@ -35,6 +35,14 @@ def test_defaults_and_nested_dotted_keys():
     ({'inner.xyz': [0.0, 0.0]}, ["'inner.xyz'", '3 elements']),
     ({'inner.gain': float('nan')}, ["'inner.gain'", 'finite']),
     ({'bogus': 1}, ["unknown parameter 'bogus'"]),
+    # an integer's finiteness is checked before it is made an int (no OverflowError)
+    ({'count': float('inf')}, ["'count'", 'finite']),
+    ({'count': float('nan')}, ["'count'", 'finite']),
+    # a group is a mapping: 0, [] or '' do not stand for its defaults
+    ({'inner': 0}, ["'inner'", 'mapping']),
+    ({'inner': []}, ["'inner'", 'mapping']),
+    ({'inner': ''}, ["'inner'", 'mapping']),
+    ({'inner': False}, ["'inner'", 'mapping']),
 ])
 def test_bad_values_raise_one_clear_line(data, words):
     with pytest.raises(ConfigError) as err:
@@ -43,3 +51,8 @@ def test_bad_values_raise_one_clear_line(data, words):
     assert '\n' not in message
     for word in words:
         assert word in message
+
+
+def test_a_group_left_empty_takes_its_defaults():
+    # YAML `inner:` with nothing under it
+    assert from_dict(Outer, {'inner': None}) == Outer()

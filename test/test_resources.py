@@ -4,8 +4,10 @@ import pytest
 
 from ros_graph import REPO
 from uav_tilt_common import resources
-from uav_tilt_common.config import ConfigError
+from uav_tilt_common.config import ConfigError, from_dict
+from uav_tilt_control.controller_core import ControllerConfig, plan_of
 from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_tools.site_params import site_overrides
 
 
 def test_from_the_source_tree_the_files_are_the_checkout(tmp_path, monkeypatch):
@@ -35,3 +37,16 @@ def test_an_unreadable_scenario_is_one_line(tmp_path):
     with pytest.raises(ConfigError) as err:
         load_scenario(str(bad))
     assert '\n' not in str(err.value) and "'scenario_file'" in str(err.value)
+
+
+def test_a_plan_is_found_like_a_scenario(tmp_path, monkeypatch):
+    # `-p plan_file:=config/plans/inspection.yaml` from any folder, as `ros2 run` users do
+    monkeypatch.chdir(tmp_path)
+    site = site_overrides(load_scenario('config/scenarios/plan.yaml'))
+    cfg = from_dict(ControllerConfig, {**site, 'autostart': 'plan',
+                                       'plan_file': 'config/plans/inspection.yaml'})
+    assert [task.kind for task in plan_of(cfg)] == ['touch', 'touch', 'slide']
+    with pytest.raises(ConfigError) as err:
+        plan_of(from_dict(ControllerConfig, {**site, 'autostart': 'plan',
+                                             'plan_file': 'missing.yaml'}))
+    assert "'plan_file'" in str(err.value) and 'no such file' in str(err.value)

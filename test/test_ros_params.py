@@ -1,7 +1,9 @@
 """Config dataclasses as ROS parameters (descriptors, bad start values, changes at run
 time), run_node's SIGINT bookkeeping and the parent watch, without a ROS graph."""
 import dataclasses
+import importlib
 import os
+import pathlib
 import signal
 import subprocess
 import sys
@@ -11,8 +13,8 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
-from ros_graph import alive
-from uav_tilt_common.config import ConfigError, param
+from ros_graph import REPO, alive
+from uav_tilt_common.config import ConfigError, fields_flat, param, unit_of
 from uav_tilt_common.ros_params import declare_config, note_sigint
 
 
@@ -83,6 +85,34 @@ def test_every_field_has_a_descriptor_with_its_range_and_unit(node_of):
     assert "one of 'a', 'b'" in node.describe_parameter('mode').additional_constraints
     assert node.describe_parameter('gains_n_m').description == 'range [0.0, 9.0] N/m; 2 elements'
     assert node.describe_parameter('contact_force').description == 'range [0.0, 20.0] N'
+
+
+NODE_CONFIGS = ('uav_tilt_sim.plant_node:PlantNodeConfig',
+                'uav_tilt_control.controller_node:ControllerNodeConfig',
+                'uav_tilt_vision.vision_node:VisionNodeConfig',
+                'uav_tilt_tools.foxglove_bridge:FoxgloveConfig')
+
+
+@pytest.mark.parametrize('path', NODE_CONFIGS)
+def test_counts_are_not_given_a_physical_unit(path):
+    # an integer parameter counts something (or pixels): '_n' in `confirm_n` is not newtons
+    module, name = path.split(':')
+    fields = fields_flat(getattr(importlib.import_module(module), name))
+    units = {field: unit_of(field, meta) for field, (default, meta) in fields.items()
+             if isinstance(default, int) and not isinstance(default, bool)}
+    assert units and all(unit in ('', 'px') for unit in units.values()), units
+
+
+@pytest.mark.parametrize('path', NODE_CONFIGS[:3] + ('uav_tilt_tools.recorder_node:'
+                                                     'RecorderConfig',))
+def test_the_readme_names_every_parameter_of_the_nodes(path):
+    module, name = path.split(':')
+    text = (pathlib.Path(REPO) / 'README.md').read_text()
+    listed = text.split('### Parameters', 1)[1].split('\n## ', 1)[0]
+    fields = fields_flat(getattr(importlib.import_module(module), name))
+    missing = {field.split('.')[0] for field in fields
+               if f"`{field.split('.')[0]}{'.*' if '.' in field else ''}`" not in listed}
+    assert not missing, missing
 
 
 @pytest.mark.parametrize('arg, words', [

@@ -61,14 +61,14 @@ def _check_scalar(name: str, value: Any, default: Any, meta: Mapping[str, Any]) 
     if isinstance(default, (int, float)):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"parameter '{name}' = {value!r} must be a number")
+        if not math.isfinite(value):
+            raise ConfigError(f"parameter '{name}' = {value!r} must be finite")
         if isinstance(default, int) and not isinstance(default, bool):
             if float(value) != int(value):
                 raise ConfigError(f"parameter '{name}' = {value!r} must be an integer")
             value = int(value)
         else:
             value = float(value)
-        if not math.isfinite(value):
-            raise ConfigError(f"parameter '{name}' = {value!r} must be finite")
         lo, hi = meta.get('lo'), meta.get('hi')
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise ConfigError(f"parameter '{name}' = {value!r} is out of range [{lo}, {hi}]")
@@ -108,9 +108,11 @@ def check_field(name: str, value: Any, default: Any, meta: Mapping[str, Any]) ->
 
 def from_dict(cls: type[ConfigT], data: Mapping[str, Any] | None, prefix: str = '') -> ConfigT:
     """Build and validate config ``cls`` from nested dicts and/or dotted keys."""
-    data = _unflatten(data or {})
+    # None is a group left empty (YAML `wall:`); 0, [] or '' are not groups
+    data = _unflatten({} if data is None else data)
     if not isinstance(data, dict):
-        raise ConfigError(f"parameter '{prefix or cls.__name__}' = {data!r} must be a mapping")
+        raise ConfigError(f"parameter '{prefix.rstrip('.') or cls.__name__}' = {data!r} "
+                          f"must be a mapping")
     names = {f.name for f in dataclasses.fields(cls)}
     for key in data:
         if key not in names:
@@ -199,12 +201,20 @@ def load_yaml(cls: type[ConfigT], path: str | os.PathLike[str],
     """Load and validate config ``cls`` from a plain YAML file; a file that cannot be read
     or parsed is one ConfigError line naming ``parameter``."""
     try:
+        data = read_yaml(path)
+    except ConfigError as err:
+        raise ConfigError(f"parameter '{parameter}' = {str(path)!r}: {err}") from None
+    return from_dict(cls, data)
+
+
+def read_yaml(path: str | os.PathLike[str]) -> Any:
+    """The data of YAML file ``path`` (None when empty); a file that cannot be read,
+    decoded as UTF-8 or parsed is a ConfigError of one line saying why."""
+    try:
         with open(path, encoding='utf-8') as stream:
-            data = yaml.safe_load(stream)
-    except (OSError, yaml.YAMLError) as err:
-        detail = ' '.join(str(err).split())
-        raise ConfigError(f"parameter '{parameter}' = {str(path)!r}: {detail}") from None
-    return from_dict(cls, data or {})
+            return yaml.safe_load(stream)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        raise ConfigError(' '.join(str(err).split())) from None
 
 
 def _is_config(value: Any) -> 'TypeGuard[DataclassInstance]':

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError, nested, param
 from uav_tilt_common.geometry import quat_multiply, rotvec_to_quat
 from uav_tilt_common.state import ActuatorCommand, VehicleState
@@ -20,7 +21,7 @@ from uav_tilt_control import frames
 from uav_tilt_control.flight_core import FlightCore, FlightCoreConfig
 from uav_tilt_control.mission import (DEFAULT_CONTACT_FORCE_N, NEAR_WALL, Mission,
                                       MissionConfig, Mode)
-from uav_tilt_control.plan import load_plan, one_touch_plan
+from uav_tilt_control.plan import check_force, load_plan, one_touch_plan
 from uav_tilt_control.site import SiteConfig
 from uav_tilt_control.target_estimator import TargetEstimator, TargetEstimatorConfig
 
@@ -57,10 +58,12 @@ def plan_of(cfg):
     if cfg.autostart == 'inspect' and cfg.plan_file:
         raise ConfigError(f"parameter 'plan_file' = {cfg.plan_file!r}: autostart 'inspect' is "
                           f"the one-touch inspection; a plan file runs with 'plan'")
-    if not cfg.plan_file:
-        return one_touch_plan(cfg.site.check(), cfg.contact_force, cfg.mission.hold_time_s)
     m = cfg.mission
-    return load_plan(cfg.plan_file, cfg.site, (m.contact_threshold_n, m.force_limit_n))
+    force_range_n = (m.contact_threshold_n, m.force_limit_n)
+    if not cfg.plan_file:
+        check_force("parameter 'contact_force'", cfg.contact_force, force_range_n)
+        return one_touch_plan(cfg.site.check(), cfg.contact_force, m.hold_time_s)
+    return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, force_range_n)
 
 
 class ControllerCore:

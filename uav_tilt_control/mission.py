@@ -26,7 +26,7 @@ from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
 from uav_tilt_control.impedance import ImpedanceConfig, contact_depth_for_force
 from uav_tilt_control.lowpass import lowpass_weight
-from uav_tilt_control.plan import Slide, Touch
+from uav_tilt_control.plan import Slide, Touch, check_force
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.trajectory import MIN_JERK_PEAK, MinJerk, PolylineCruise, Ramp
 from uav_tilt_control.types import ImpedanceSetpoint
@@ -106,7 +106,8 @@ class MissionConfig:
     # RETREAT and HOVER's transit land (failsafe 'unreachable'); a back-off ('clear') goes
     # on from where it got to.
     arrive_timeout_s: float = param(15.0, lo=1.0, hi=600.0)
-    confirm_n: int = param(5, lo=1, hi=100)
+    confirm_n: int = param(5, lo=1, hi=100, unit='',
+                           doc='detections within confirm_radius_m that confirm a target')
     confirm_radius_m: float = param(0.15, lo=0.01, hi=2.0)
     confirm_timeout_s: float = param(4.0, lo=0.1, hi=60.0)
     # a candidate seen but not confirmed farther than this is looked at again from here
@@ -299,10 +300,8 @@ class Mission:
             k_contact_z_n_per_m = ImpedanceConfig().contact.k_c(vehicle.mass_kg)[0][2]
         self.contact_force_n = float(contact_force_n)
         self.k_contact_z_n_per_m = float(k_contact_z_n_per_m)
-        if not 0.0 <= self.contact_force_n < self.config.force_limit_n:
-            raise ConfigError(
-                f"parameter 'contact_force' = {contact_force_n!r} must be in "
-                f"[0, force_limit_n = {self.config.force_limit_n!r})")
+        check_force("parameter 'contact_force'", self.contact_force_n,
+                    (self.config.contact_threshold_n, self.config.force_limit_n))
         if self.config.target_lost_retreat_s <= self.config.target_lost_hold_s:
             raise ConfigError(
                 f"parameter 'target_lost_retreat_s' = {self.config.target_lost_retreat_s!r} "

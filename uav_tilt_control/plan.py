@@ -16,9 +16,8 @@ Every problem is one ConfigError line naming the task (index and kind) and the f
 import dataclasses
 
 import numpy as np
-import yaml
 
-from uav_tilt_common.config import ConfigError, from_dict, param
+from uav_tilt_common.config import ConfigError, from_dict, param, read_yaml
 
 UV_RANGE_M = 1000.0
 
@@ -102,6 +101,15 @@ def _listed(array):
     return None if array is None else np.asarray(array, dtype=float).tolist()
 
 
+def check_force(name, force_n, force_range_n):
+    """A push asked for must be felt as contact and stay under the force limit:
+    ``force_range_n`` = (mission.contact_threshold_n, mission.force_limit_n), open."""
+    low, high = force_range_n
+    if not low < force_n < high:
+        raise ConfigError(f"{name} = {force_n!r} must be in ({low}, {high}) "
+                          f"(mission.contact_threshold_n, mission.force_limit_n)")
+
+
 def one_touch_plan(site, force_n, hold_s):
     """Today's inspection as a plan: one touch of the target, near the site's hint if any."""
     hint = site.target_hint_map()
@@ -117,11 +125,9 @@ def load_plan(path, site, force_range_n):
     ``force_range_n``: (low, high), the open range a task's push must lie in.
     """
     try:
-        with open(path, encoding='utf-8') as stream:
-            data = yaml.safe_load(stream)
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f"plan_file '{path}': cannot be read: "
-                          f"{' '.join(str(err).split())}") from None
+        data = read_yaml(path)
+    except ConfigError as err:
+        raise ConfigError(f"plan_file '{path}': cannot be read: {err}") from None
     try:
         return parse_plan(data, site, force_range_n)
     except ConfigError as err:
@@ -131,11 +137,13 @@ def load_plan(path, site, force_range_n):
 def parse_plan(data, site, force_range_n):
     """Validate and resolve plan ``data`` (as loaded from YAML); see :func:`load_plan`."""
     if not isinstance(data, dict) or set(data) != {'tasks'}:
-        keys = sorted(data) if isinstance(data, dict) else data
+        keys = sorted(map(str, data)) if isinstance(data, dict) else data
         raise ConfigError(f"a plan is a mapping with the one key 'tasks', not {keys!r}")
     entries = data['tasks']
-    if not isinstance(entries, list) or not entries:
-        raise ConfigError(f"'tasks' = {entries!r} is empty: a plan needs at least one task")
+    if not isinstance(entries, list):
+        raise ConfigError(f"'tasks' = {entries!r} must be a list of tasks")
+    if not entries:
+        raise ConfigError("'tasks' is empty: a plan needs at least one task")
     site.check()
     return [_resolve(i, entry, site, force_range_n) for i, entry in enumerate(entries)]
 
@@ -155,10 +163,7 @@ def _resolve(i, entry, site, force_range_n):
         value = getattr(task, name, None)
         if value is not None and len(value) != 2:
             raise ConfigError(f"{where}: '{name}' = {value!r} must have 2 elements (u, v)")
-    low, high = force_range_n
-    if not low < task.force_n < high:
-        raise ConfigError(f"{where}: 'force_n' = {task.force_n!r} must be in ({low}, {high}) "
-                          f"(mission.contact_threshold_n, mission.force_limit_n)")
+    check_force(f"{where}: 'force_n'", task.force_n, force_range_n)
     if not site.wall_size_known:
         raise ConfigError(f"{where}: the site's wall is needed (site.wall_position_m, "
                           f"site.wall_width_m, site.wall_height_m)")

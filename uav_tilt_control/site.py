@@ -37,6 +37,11 @@ class SiteConfig:
         if self.target_hint_uv_m and not self.wall_position_m:
             raise ConfigError("parameter 'site.target_hint_uv_m' needs 'site.wall_position_m' "
                               "(the wall the hint is on)")
+        if self.target_hint_uv_m and self.wall_size_known and not self.on_wall(
+                self.target_hint_uv_m, margin_m=HINT_ERROR_M):
+            raise ConfigError(f"parameter 'site.target_hint_uv_m' = {self.target_hint_uv_m!r} "
+                              f"is more than {HINT_ERROR_M} m off the wall (site.wall_width_m "
+                              f"{self.wall_width_m}, site.wall_height_m {self.wall_height_m})")
         if len(set(self.target_ids)) != len(self.target_ids):
             raise ConfigError(f"parameter 'site.target_ids' = {self.target_ids!r} repeats an id")
         return self
@@ -64,10 +69,12 @@ class SiteConfig:
         """The wall's outward surface normal in map."""
         return self.rotation()[:, 2]
 
-    def on_wall(self, uv_m):
-        """True when (u, v) lies on the surveyed wall (edges included)."""
+    def on_wall(self, uv_m, margin_m=0.0):
+        """True when (u, v) lies on the surveyed wall (edges included), or within
+        ``margin_m`` of it."""
         u, v = uv_m
-        return abs(u) <= self.wall_width_m / 2.0 and 0.0 <= v <= self.wall_height_m
+        return (abs(u) <= self.wall_width_m / 2.0 + margin_m
+                and -margin_m <= v <= self.wall_height_m + margin_m)
 
     def target_hint_map(self):
         """The one-touch hint as a map point, or None without one."""

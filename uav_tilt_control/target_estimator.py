@@ -45,7 +45,8 @@ class TargetEstimatorConfig:
     gate_distance_m: float = param(0.2, lo=0.001, hi=10.0)
     gate_chi2: float = param(16.27, lo=1.0, hi=1000.0)      # chi2(3 dof) at 99.9 %
     gate_angle_rad: float = param(0.5, lo=0.01, hi=3.2)
-    reacquire_n: int = param(10, lo=1, hi=1000)             # consistent rejections to reset
+    reacquire_n: int = param(10, lo=1, hi=1000, unit='',
+                             doc='consistent rejections that reset the estimate')
     valid_age_s: float = param(0.5, lo=0.01, hi=10.0)       # estimate older than this: invalid
     # first fix this near a hint: 0.45 m, so that a look-alike is told apart when it is
     # over 0.75 m (0.45 + HINT_ERROR_M) from the target along either of the wall's axes

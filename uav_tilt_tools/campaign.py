@@ -30,6 +30,7 @@ from uav_tilt_tools.fly import DURATION_S, jsonable
 from uav_tilt_common.targets import OBJECT_CLASSES
 from uav_tilt_control.site import HINT_ERROR_M
 from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
+from uav_tilt_tools import cli_args
 from uav_tilt_tools.campaign_ray import CampaignError, ray_runs
 
 BACKENDS = ('local', 'ray')
@@ -299,9 +300,9 @@ def _ignore_sigint():
 def register(sub):
     """Add the `campaign` sub-command."""
     parser = sub.add_parser('campaign', help='the mission over randomised scenarios (JSON)')
-    parser.add_argument('--n', type=int, default=20)
-    parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--workers', type=int, default=None,
+    parser.add_argument('--n', type=cli_args.count, default=20)
+    parser.add_argument('--seed', type=cli_args.seed, default=0)
+    parser.add_argument('--workers', type=cli_args.count, default=None,
                         help='runs at once (local) or CPUs of the local Ray; default: cores')
     parser.add_argument('--backend', choices=BACKENDS, default='local',
                         help='ray: one Ray task per run (pip install uav_tilt[ray])')
@@ -313,7 +314,7 @@ def register(sub):
                         help='skip the runs DIR/runs.jsonl already holds')
     parser.add_argument('--record', action='store_true',
                         help='one MCAP per run: DIR/run_NNNN/recording.mcap')
-    parser.add_argument('--duration', type=float, default=None,
+    parser.add_argument('--duration', type=cli_args.duration_s, default=None,
                         help=f'simulated seconds allowed per mission (default {DURATION_S:.0f}'
                              f' per task)')
     parser.add_argument('--plan', default=None, metavar='FILE',

@@ -20,6 +20,7 @@ from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_control.controller_core import ControllerConfig, plan_of
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_tools import cli_args
 from uav_tilt_tools.site_params import site_overrides
 from uav_tilt_tools.task_metrics import failure_of
 
@@ -62,10 +63,14 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
         if bag is not None:
             bag.close()
     wall_s = time.perf_counter() - start
-    result['rtf'] = result['sim_time_s'] / wall_s
-    result['controller_rate_hz'] = result['ticks'] / wall_s
+    # the keys of a node graph's summary.json, on this process's wall clock
+    result.update(rtf=result['sim_time_s'] / wall_s,
+                  controller_rate_hz=result['ticks'] / wall_s, vision_fps=None,
+                  vision_latency_ms_p95=None)
     if vision is not None:
         result['vision_fps'] = vision.frames / wall_s
+        if vision.latency_ms:
+            result['vision_latency_ms_p95'] = float(np.percentile(vision.latency_ms, 95))
     result['failure'] = failure_of(result)
     return result
 
@@ -84,7 +89,12 @@ def _overrides(pairs):
         key, sep, text = pair.partition('=')
         if not sep:
             raise ConfigError(f"--set {pair!r}: expected KEY=VALUE")
-        out[key] = yaml.safe_load(text)
+        if key == 'target_source':
+            raise ConfigError(f"--set {pair!r}: the target's source is --target-source")
+        try:
+            out[key] = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            raise ConfigError(f"--set {pair!r}: {' '.join(str(err).split())}") from None
     return out
 
 
@@ -94,7 +104,7 @@ def register(sub):
     parser.add_argument('--scenario', required=True, help='scenario YAML (DESIGN section 5)')
     parser.add_argument('--target-source', choices=('vision', 'ground_truth'),
                         default='vision')
-    parser.add_argument('--seed', type=int, default=None,
+    parser.add_argument('--seed', type=cli_args.scenario_seed, default=None,
                         help="overrides the scenario's seed (wind, noise, textures)")
     parser.add_argument('--hint', type=float, nargs=2, metavar=('U', 'V'), default=None,
                         help="roughly where the target is on the scenario's wall [m]")
@@ -102,7 +112,7 @@ def register(sub):
                         help='an inspection plan (YAML: touch and slide tasks)')
     parser.add_argument('--set', action='append', metavar='KEY=VALUE',
                         help='a controller parameter, e.g. mission.hold_time_s=3')
-    parser.add_argument('--duration', type=float, default=None,
+    parser.add_argument('--duration', type=cli_args.duration_s, default=None,
                         help=f'simulated seconds allowed (default {DURATION_S:.0f} per task)')
     parser.set_defaults(func=_run)
 

@@ -4,6 +4,7 @@ The same cores as plant_node and controller_node, wired the way the nodes are: e
 plant's sensors go to the controller (odometry, F/T, then the IMU tick) and its command goes
 back. Vision comes in through an optional callable.
 """
+import collections
 import time
 
 import numpy as np
@@ -117,9 +118,10 @@ def mission_result(flight):
     history = [modes[0]] + [modes[i] for i in range(1, len(modes))
                             if modes[i][1] != modes[i - 1][1]]
     world = flight.plant.world
-    push = ([push_along_normal(quat_to_matrix(e['q_map_base']), e['ft_force_ee_n'],
-                               world.R_map_target) for e in log]
-            if world.R_map_target is not None else [])
+    # the push on the target's surface; a world without a target has only its wall
+    R_surface = world.R_map_target if world.R_map_target is not None else world.R_map_wall
+    push = [push_along_normal(quat_to_matrix(e['q_map_base']), e['ft_force_ee_n'], R_surface)
+            for e in log]
     normal = world.R_map_target[:, 2] if world.R_map_target is not None else None
     t_log = [e['t_s'] for e in log]
     result = mission_summary(modes, flight.status, t_log, push, t_log,
@@ -185,14 +187,18 @@ class CameraVision:
     frame time (as vision_node stamps target/candidates and vision/planes), an empty list
     included. ``last_frame`` is
     (stamp_s, FrameResult, rendered_ns, processed_ns) of the newest frame (wall clock ns
-    when the image was ready and when the pipeline was done with it), or None."""
+    when the image was ready and when the pipeline was done with it), or None;
+    ``latency_ms`` the last frames' times from one to the other, the window of
+    vision/status's latency."""
 
     def __init__(self, pipeline, camera_rate_hz, control_rate_hz):
+        from uav_tilt_vision.pipeline import STATS_WINDOW
         self.pipeline = pipeline
         self.every = max(1, int(round(control_rate_hz / camera_rate_hz)))
         self.frames = 0
         self.found = 0
         self.last_frame = None
+        self.latency_ms = collections.deque(maxlen=STATS_WINDOW)
 
     def __call__(self, plant, t_s):
         """(stamp_s, candidates, planes) of this tick's frame, or None when none is
@@ -203,6 +209,7 @@ class CameraVision:
         rendered_ns = time.time_ns()
         result = self.pipeline.process(rgb, depth, t_s)
         self.last_frame = (t_s, result, rendered_ns, time.time_ns())
+        self.latency_ms.append((self.last_frame[3] - rendered_ns) * 1e-6)
         self.frames += 1
         self.found += int(result.found)
         return t_s, result.candidates, result.planes

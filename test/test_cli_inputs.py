@@ -1,0 +1,114 @@
+"""`uav-tilt fly` and `campaign` refuse what they cannot fly with one line and exit code 2
+before flying anything (DESIGN section 5-7), and fly what they can: a world without a
+target, and every summary.json key."""
+import pytest
+import yaml
+
+from uav_tilt_tools import cli
+from uav_tilt_tools.fly import fly
+from uav_tilt_tools.report import SUMMARY_KEYS
+from uav_tilt_sim.scenario import load_scenario
+
+PLAN = {'tasks': [{'touch': {'target': 'plate_a', 'near_uv_m': [-0.4, 1.5]}}]}
+
+
+def refusal(capsys, argv):
+    """(exit code, stdout, the lines on stderr) of `uav-tilt ARGV` run in this process."""
+    try:
+        code = cli.main(argv)
+    except SystemExit as stop:          # argparse's own refusals
+        code = stop.code
+    out, err = capsys.readouterr()
+    return code, out, [line for line in err.splitlines() if line.strip()]
+
+
+def written(tmp_path, name, data):
+    """A file of YAML ``data`` (or raw bytes) in tmp_path; its path."""
+    path = tmp_path / name
+    if isinstance(data, bytes):
+        path.write_bytes(data)
+    else:
+        path.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
+    return str(path)
+
+
+@pytest.mark.parametrize('scenario, words', [
+    ({'seed': float('inf')}, ["'seed'", 'finite']),
+    ({'texture_seed': float('-inf')}, ["'texture_seed'", 'finite']),
+    ({'wall': 0}, ["'wall'", 'mapping']),
+    ({'wall': []}, ["'wall'", 'mapping']),
+    (b'\xff\xfe not text', ['scenario', 'utf-8']),
+])
+def test_a_bad_scenario_file_is_one_line(tmp_path, capsys, scenario, words):
+    path = written(tmp_path, 'scenario.yaml', scenario)
+    code, out, err = refusal(capsys, ['fly', '--scenario', path])
+    assert code == 2 and out == '' and len(err) == 1, err
+    assert err[0].startswith('uav-tilt fly:') and all(w in err[0] for w in words), err
+
+
+@pytest.mark.parametrize('plan, words', [
+    ({**PLAN, 1: 'x'}, ["one key 'tasks'", "'1'"]),
+    ({'tasks': PLAN['tasks'][0]}, ["'tasks'", 'must be a list']),
+    (b'\xff\xfe not text', ['cannot be read', 'utf-8']),
+])
+def test_a_bad_plan_file_is_one_line(tmp_path, capsys, plan, words):
+    path = written(tmp_path, 'plan.yaml', plan)
+    for argv in (['fly', '--scenario', 'config/scenarios/plan.yaml', '--plan', path],
+                 ['campaign', '--n', '1', '--scenario', 'config/scenarios/plan.yaml',
+                  '--plan', path]):
+        code, out, err = refusal(capsys, argv)
+        assert code == 2 and out == '' and len(err) == 1, err
+        assert all(w in err[0] for w in words), err
+
+
+@pytest.mark.parametrize('args, words', [
+    # a push the touch would not feel, or one over the force limit, as a plan's is refused
+    (['--set', 'contact_force=0'], ["'contact_force' = 0.0", '(1.0, 15.0)']),
+    (['--set', 'contact_force=18'], ["'contact_force' = 18.0", '(1.0, 15.0)']),
+    (['--set', 'contact_force=[1'], ['--set', 'contact_force=[1']),
+    (['--set', 'target_source=vision'], ['--target-source']),
+    # a hint is good to 0.3 m: one farther off the 5 m x 3.5 m wall is a mistake
+    (['--hint', '100', '100'], ["'site.target_hint_uv_m'", 'off the wall']),
+    (['--hint', '2.85', '1.0'], ["'site.target_hint_uv_m'", 'off the wall']),
+])
+def test_a_bad_controller_setting_is_one_line(capsys, args, words):
+    code, out, err = refusal(capsys, ['fly', '--scenario', 'config/scenarios/default.yaml',
+                                      '--target-source', 'ground_truth', *args])
+    assert code == 2 and out == '' and len(err) == 1, err
+    assert err[0].startswith('uav-tilt fly:') and all(w in err[0] for w in words), err
+
+
+@pytest.mark.parametrize('argv, words', [
+    (['fly', '--scenario', 'config/scenarios/default.yaml', '--seed', '-1'], ['--seed']),
+    (['fly', '--scenario', 'config/scenarios/default.yaml', '--seed', str(2**31)], ['--seed']),
+    (['fly', '--scenario', 'config/scenarios/default.yaml', '--duration', '0'],
+     ['--duration']),
+    (['fly', '--scenario', 'config/scenarios/default.yaml', '--duration', 'nan'],
+     ['--duration']),
+    (['campaign', '--n', '0'], ['--n']),
+    (['campaign', '--n', '-1'], ['--n']),
+    (['campaign', '--workers', '-2'], ['--workers']),
+    (['campaign', '--seed', '-1'], ['--seed']),
+    (['campaign', '--duration', 'inf'], ['--duration']),
+])
+def test_a_bad_option_value_is_refused_by_the_parser(capsys, argv, words):
+    code, out, err = refusal(capsys, argv)
+    assert code == 2 and out == ''
+    assert all(w in err[-1] for w in words) and 'error' in err[-1], err
+
+
+def test_a_hint_just_off_the_wall_is_within_its_error(capsys):
+    # a target at the wall's edge, its hint 0.25 m beyond it: accepted (and flown briefly)
+    code, out, err = refusal(capsys, ['fly', '--scenario', 'config/scenarios/default.yaml',
+                                      '--target-source', 'ground_truth', '--hint', '2.75',
+                                      '1.5', '--duration', '0.5'])
+    assert code == 1 and '"not_completed"' in out, err
+
+
+def test_a_world_without_a_target_is_flown_and_reported(tmp_path):
+    path = written(tmp_path, 'no_target.yaml',
+                   {'objects': [{'cls': 'gauge', 'u_m': 0.0, 'v_m': 1.5}]})
+    result = fly(load_scenario(path), 'ground_truth', duration_s=3.0)
+    assert set(SUMMARY_KEYS) <= result.keys()
+    assert result['poi_error_m'] is None and result['max_force_n'] is not None
+    assert result['failure']['reason'] == 'not_completed'
