@@ -20,6 +20,7 @@ from uav_tilt_common.pose import Pose
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim.camera import CameraConfig
 from uav_tilt_sim.scenario import DEFAULT_SCENARIO
+from uav_tilt_tools import topic_graph
 from uav_tilt_vision.pipeline import FrameResult
 from uav_tilt_vision.vision_node import VisionNodeConfig, pose_msg
 
@@ -43,6 +44,13 @@ def poses_are_one_per_processed_frame(probe, max_lost_fraction=0.0):
         received = len(probe.messages[names.TARGET_POSE])
         return processed > 0 and 0 <= processed - received <= max_lost_fraction * processed
     return probe.spin_until(matched, 5.0)
+
+
+def published_types(probe):
+    """topic -> its types, of the /uav topics and /clock that have a publisher now."""
+    return {topic: types for topic, types in probe.node.get_topic_names_and_types()
+            if (topic.startswith(names.NAMESPACE + '/') or topic == names.CLOCK)
+            and probe.node.count_publishers(topic)}
 
 
 # Small frames: from the test process, best-effort delivery of fragmented (large) samples
@@ -164,6 +172,7 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
     try:
         assert probe.spin_until(lambda: len(probe.messages[names.TARGET_POSE]) >= 60, 60.0), \
             (tmp_path / 'vision.log').read_text()
+        published = published_types(probe)
         # The probe keeps taking poses while the plant shuts down (a pose left untaken in
         # a reliable reader for long can be lost to it).
         codes = []
@@ -181,6 +190,17 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
         stop(driver)
         vision_code, _ = stop(vision)
     assert vision_code == 0, (tmp_path / 'vision.log').read_text()
+
+    # Plant and vision publish what the contract lists, with its types (the recorder
+    # subscribes to these before any publisher exists).
+    contract = {topic_graph.resolve(t): [type_name] for t, type_name in names.TOPIC_TYPES.items()}
+    targets = topic_graph.resolve(names.GROUND_TRUTH_TARGETS) + '/'
+    for topic, types in published.items():
+        expected = contract[topic_graph.resolve(names.GROUND_TRUTH_TARGET)] \
+            if topic.startswith(targets) else contract.get(topic)
+        assert types == expected, (topic, types)
+    assert {topic_graph.resolve(t) for t in (names.TARGET_CANDIDATES, names.VISION_PLANES,
+                                             names.CAMERA_COLOR)} <= published.keys()
 
     poses = probe.messages[names.TARGET_POSE]
     stamps = [ros_msgs.stamp_ns(p.header.stamp) for p in poses]

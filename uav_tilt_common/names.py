@@ -55,6 +55,7 @@ TOPIC_TYPES = {
     CAMERA_DEPTH: 'sensor_msgs/msg/Image',
     CAMERA_INFO: 'sensor_msgs/msg/CameraInfo',
     TARGET_POSE: 'geometry_msgs/msg/PoseWithCovarianceStamped',
+    TARGET_CANDIDATES: 'sensor_msgs/msg/PointCloud2',
     VISION_DEBUG_IMAGE: 'sensor_msgs/msg/Image',
     VISION_PLANES: 'sensor_msgs/msg/PointCloud2',
     SETPOINT_POSE: 'geometry_msgs/msg/PoseStamped',

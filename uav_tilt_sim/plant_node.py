@@ -132,8 +132,20 @@ class PlantNode(Node):
             f'plant up: mode={self.cfg.mode} rtf={self.cfg.rtf} '
             f'scenario={self.cfg.scenario_file or "default"} camera={self.cfg.camera_enabled}')
 
+    def _free_rtf(self):
+        """The pace of ticks no command drives (realtime mode, and lockstep's free run after
+        a timeout): ``rtf``, or the wall clock for 0, where "as fast as possible" has no
+        meaning."""
+        return self.cfg.rtf if self.cfg.rtf > 0 else 1.0
+
+    @property
+    def target_rtf(self):
+        """The real-time factor plant/status reports as the target: the free pace in
+        realtime mode, ``rtf`` in lockstep (0: not paced)."""
+        return self._free_rtf() if self.cfg.mode == 'realtime' else self.cfg.rtf
+
     def _free_tick_period_s(self):
-        return self.plant.dt_tick / (self.cfg.rtf if self.cfg.rtf > 0 else 1.0)
+        return self.plant.dt_tick / self._free_rtf()
 
     def _on_parameters(self, changed):
         """A new rtf paces from now on: sim and wall time restart their common origin."""
@@ -241,7 +253,7 @@ class PlantNode(Node):
             # the clock starts with the first tick, not with the node's start-up
             self.run_start = (time.monotonic(), self.plant.t_s)
             self.wall_start, self.sim_start = self.run_start
-        rate = self.cfg.rtf if self.cfg.rtf > 0 else 1.0
+        rate = self._free_rtf()
         dt = self.plant.dt_tick
         now = time.monotonic()
         due = self.sim_start + (now - self.wall_start) * rate
@@ -328,7 +340,7 @@ class PlantNode(Node):
         self.last_status = (now, self.plant.t_s)
         values = dict(mode=self.cfg.mode, sim_time_s=self.plant.t_s, tick=self.plant.tick,
                       wall_time_s=now - self.wall_t0, rtf=rtf, rtf_mean=self._run_rtf(now),
-                      target_rtf=self.cfg.rtf, synced=self.synced,
+                      target_rtf=self.target_rtf, synced=self.synced,
                       rejected_commands=self.rejects.total, in_contact=self.in_contact,
                       **self.stats)
         values.update({f'rejected_{k}': v for k, v in self.rejects.counts.items()})
@@ -354,7 +366,7 @@ class PlantNode(Node):
             return ''
         self.last_warning = (now, self.plant.t_s, self.stats['late_commands'],
                              self.stats['dropped_ticks'])
-        target = self.cfg.rtf if self.cfg.rtf > 0 else 1.0
+        target = self.target_rtf
         rtf = (self.plant.t_s - sim) / (now - wall)
         new_late = self.stats['late_commands'] - late
         new_dropped = self.stats['dropped_ticks'] - dropped
@@ -371,7 +383,7 @@ class PlantNode(Node):
         now = time.monotonic()
         return dict(mode=self.cfg.mode, sim_time_s=self.plant.t_s,
                     wall_time_s=None if self.run_start is None else now - self.run_start[0],
-                    rtf=self._run_rtf(now), target_rtf=self.cfg.rtf,
+                    rtf=self._run_rtf(now), target_rtf=self.target_rtf,
                     rejected_commands=self.rejects.total, **self.stats)
 
     def destroy_node(self):

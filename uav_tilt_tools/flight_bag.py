@@ -8,7 +8,6 @@ stamps, into an :class:`uav_tilt_tools.mcap_bag.McapBag`; ``uav-tilt report`` re
 a recording of the graph. Log times are the wall clock of the in-process run. Not written:
 the camera images (about 0.3 MB a frame), which no report reads, and the services.
 """
-import collections
 import time
 
 import numpy as np
@@ -22,27 +21,15 @@ from uav_tilt_common.modes import WAITING_FOR_SENSORS
 
 CONTROLLER_STATUS_HZ = 10.0     # controller_node's default status_rate_hz
 STATUS_HZ = 2.0                 # plant_node's and vision_node's
-STATS_WINDOW = 100              # frames in the vision latency statistics, as vision_node
 
-TYPES = {
-    names.CLOCK: 'rosgraph_msgs/msg/Clock',
-    names.IMU: 'sensor_msgs/msg/Imu',
-    names.ODOM: 'nav_msgs/msg/Odometry',
-    names.EE_WRENCH: 'geometry_msgs/msg/WrenchStamped',
-    names.ACTUATORS_CMD: 'sensor_msgs/msg/JointState',
-    names.ACTUATORS_STATE: 'sensor_msgs/msg/JointState',
-    names.GROUND_TRUTH_ODOM: 'nav_msgs/msg/Odometry',
-    names.GROUND_TRUTH_TARGET: 'geometry_msgs/msg/PoseStamped',
-    names.PLANT_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
-    names.CONTROLLER_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
-}
-VISION_TYPES = {
-    names.CAMERA_INFO: 'sensor_msgs/msg/CameraInfo',
-    names.TARGET_CANDIDATES: 'sensor_msgs/msg/PointCloud2',
-    names.TARGET_POSE: 'geometry_msgs/msg/PoseWithCovarianceStamped',
-    names.VISION_PLANES: 'sensor_msgs/msg/PointCloud2',
-    names.VISION_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
-}
+# The topics written, with the contract's types (names.TOPIC_TYPES).
+TYPES = {topic: names.TOPIC_TYPES[topic] for topic in (
+    names.CLOCK, names.IMU, names.ODOM, names.EE_WRENCH, names.ACTUATORS_CMD,
+    names.ACTUATORS_STATE, names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
+    names.PLANT_STATUS, names.CONTROLLER_STATUS)}
+VISION_TYPES = {topic: names.TOPIC_TYPES[topic] for topic in (
+    names.CAMERA_INFO, names.TARGET_CANDIDATES, names.TARGET_POSE, names.VISION_PLANES,
+    names.VISION_STATUS)}
 
 
 def absolute(topic, namespace=names.NAMESPACE):
@@ -69,8 +56,6 @@ class FlightBag:
         self._window = (time.time_ns(), 0)     # (wall ns, tick) at the last status
         self._frame_stamp = None
         self._vision_window = (time.time_ns(), 0)
-        self._latency_ms = collections.deque(maxlen=STATS_WINDOW)
-        self._frames = self._found = 0
 
     def _write(self, topic, msg, log_ns):
         self.bag.write(absolute(topic), serialize_message(msg), log_ns)
@@ -138,9 +123,6 @@ class FlightBag:
         if result.planes is not None:
             self._write(names.VISION_PLANES, ros_msgs.planes_msg(result.planes, stamp),
                         processed_ns)
-        self._latency_ms.append((processed_ns - rendered_ns) * 1e-6)
-        self._frames += 1
-        self._found += int(result.found)
 
     def _write_controller_status(self, flight, now):
         """controller/status as controller_node's, its loop rate over the wall clock."""
@@ -166,14 +148,15 @@ class FlightBag:
             'plant', values, ros_msgs.to_stamp(plant.t_s)), now)
 
     def _write_vision_status(self, now):
+        vision = self.vision
         wall_ns, frames = self._vision_window
-        self._vision_window = (now, self._frames)
-        detector = self.vision.pipeline.detector
+        self._vision_window = (now, vision.frames)
+        detector = vision.pipeline.detector
         values = dict(backend=detector.backend, model=detector.model_path,
-                      fps=(self._frames - frames) / max((now - wall_ns) * 1e-9, 1e-9),
-                      frames_processed=self._frames, targets_found=self._found)
-        if self._latency_ms:
-            latency = np.asarray(self._latency_ms)
+                      fps=(vision.frames - frames) / max((now - wall_ns) * 1e-9, 1e-9),
+                      frames_processed=vision.frames, targets_found=vision.found)
+        if vision.latency_ms:
+            latency = np.asarray(vision.latency_ms)
             values.update(latency_ms_p50=float(np.percentile(latency, 50)),
                           latency_ms_p95=float(np.percentile(latency, 95)))
         stamp = ros_msgs.to_stamp(self._frame_stamp or 0.0)

@@ -32,6 +32,8 @@ from uav_tilt_vision.target_pose import CameraIntrinsics, estimate_target_pose, 
     pose_quaternion_from_normal
 
 STAGES = ('detector', 'tracker', 'poi', 'pose', 'planes')
+# vision/status's latency and share statistics cover the last frames
+STATS_WINDOW = 100
 MAX_CANDIDATES = 6
 # A detection continues the track when it overlaps the tracked box at least this much.
 TRACK_IOU = 0.3

@@ -29,14 +29,12 @@ from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.targets import no_target_covariance
 from uav_tilt_vision.backends import BACKENDS, OnnxDetector, TorchDetector, load_detector
-from uav_tilt_vision.pipeline import STAGES, FrameResult, VisionConfig, VisionPipeline, \
-    check_frame, draw_debug
+from uav_tilt_vision.pipeline import STAGES, STATS_WINDOW, FrameResult, VisionConfig, \
+    VisionPipeline, check_frame, draw_debug
 from uav_tilt_vision.target_pose import CameraIntrinsics
 
 # Tried in this order, beside ``model_path``, when it cannot be loaded.
 FALLBACK_MODELS = ('detector_int8.onnx', 'detector_pruned.pt', 'detector_fp32.pt')
-# Latency and share statistics cover the last frames.
-STATS_WINDOW = 100
 
 
 @dataclasses.dataclass
@@ -197,13 +195,14 @@ class VisionNode(Node):
         result = self.pipeline.process(rgb, depth, ros_msgs.from_stamp(stamp))
         self.pub_candidates.publish(ros_msgs.candidates_msg(result.candidates, stamp))
         self.pub_pose.publish(pose_msg(result, stamp))
+        latency_s = time.monotonic() - arrival      # to the target's publication (DESIGN)
         if result.planes is not None:
             self.pub_planes.publish(ros_msgs.planes_msg(result.planes, stamp))
         if self.pub_debug.get_subscription_count():
             self.pub_debug.publish(ros_msgs.image_msg(draw_debug(rgb, result), stamp))
         self.counts['frames_processed'] += 1
         self.counts['targets_found'] += int(result.found)
-        self.window.append((time.monotonic() - arrival, result))
+        self.window.append((latency_s, result))
 
     def on_status(self):
         """vision/status: rates, latency from image arrival to publish, shares, rejections."""
