@@ -34,6 +34,36 @@ def test_check_env_passes_with_the_camera():
 def test_bad_options_stop_with_one_clear_error():
     with pytest.raises(Exception, match='start'):
         gym_env.ContactInspectionEnv(start='orbit')
+    # 300 Hz over 7 Hz is no whole number of control ticks
+    with pytest.raises(ValueError, match='action_rate_hz'):
+        gym_env.ContactInspectionEnv(action_rate_hz=7.0)
+    with pytest.raises(gym.error.ResetNeeded):
+        gym_env.ContactInspectionEnv().step(np.zeros(3, dtype=np.float32))
+
+
+def test_a_takeoff_episode_counts_its_time_from_the_wall_and_refuses_bad_input():
+    # gymnasium's checker wrapper takes a raising reset or step for a broken environment
+    env = gym.make(gym_env.ENV_ID, start='takeoff', episode_s=1.0, disable_env_checker=True)
+    try:
+        with pytest.raises(ValueError, match='options'):
+            env.reset(seed=5, options={'start': 'wall'})
+        env.reset(seed=int(np.random.default_rng().integers(0, 2**31 - 1)))
+        for bad in ([np.nan, 0.0, 0.0], [0.0, np.inf, 0.0], [0.0, 0.0]):
+            with pytest.raises(ValueError, match='action'):
+                env.step(np.array(bad, dtype=np.float32))
+        arrived = None
+        for _ in range(5000):       # the flight in takes tens of seconds: 30 steps each
+            _, _, terminated, truncated, info = env.step(np.zeros(3, dtype=np.float32))
+            if arrived is None and info['mode'] == 'CONTACT':
+                arrived = info['t_s']
+            if terminated or truncated:
+                break
+        # a second at the wall, however long the flight in took
+        assert truncated and not terminated and arrived is not None, info
+        assert info['outcome'] == 'time_limit'
+        assert info['t_s'] - arrived == pytest.approx(1.0, abs=0.1), (arrived, info)
+    finally:
+        env.close()
 
 
 def test_two_vector_envs_reproduce_from_their_seeds():
@@ -79,6 +109,7 @@ def test_the_missions_controller_earns_the_reward_its_touch_metrics_imply():
                 break
         base = env.unwrapped
         assert info['outcome'] == 'success', (world, info)
+        assert info['mode'] in ('HOLD', 'RETREAT'), info      # ended with the hold
         metrics = mission_result(base.flight)
         cfg = base.cfg
         dt_s = base.flight.plant.dt_tick
@@ -109,7 +140,9 @@ def test_a_hold_completed_off_the_point_is_a_failure():
             _, reward, terminated, truncated, info = env.step(action)
             if terminated or truncated:
                 break
-        assert env.unwrapped.flight.status.get('inspection_completed'), info
+        # the controller completed its hold; the episode ends there, not after the landing
+        assert [r.success for r in env.unwrapped.flight.core.mission.records] == [True], info
+        assert info['mode'] in ('HOLD', 'RETREAT')
         assert info['outcome'] == 'off_target', (info, offset_m)
         assert reward < 1.0 - cfg.failure_penalty
     finally:

@@ -37,23 +37,28 @@ z off the surface); ``wrench`` (6,) the F/T reading (ee_link, N and N m); ``push
 (1,) the measured push along the normal minus the setpoint; ``phase`` Discrete(5) (close,
 touch (with CONTACT's ``align`` pauses), press, hold, other); with ``camera=True`` also
 ``image`` (H, W, 3) uint8, the eye-in-hand camera at the end of the step.
-``render_mode='rgb_array'`` renders that camera.
+``render_mode='rgb_array'`` renders that camera. An action that is not three finite
+numbers is a ValueError (one beyond [-1, 1] is clipped).
 
 **Reward** (from the simulator's truth): each control tick in HOLD earns
 :func:`touch_reward` = 1 - ((push - F_d) / force_scale_n)^2 - poi_error / poi_scale_m
 (push: the contact force along the normal; poi_error: the tip's distance from the POI
-along the surface, as the mission's metrics measure both), and a step's reward is the mean
-over its ticks; so an episode's return is (HOLD ticks / ticks per step) times one minus
+along the surface, as the mission's metrics measure both), and a step's reward is its
+ticks' sum over ``ticks_per_step`` (their mean, but for a last step cut short); so an
+episode's return is (HOLD ticks / ticks per step) times one minus
 the mission's (force_rms_error_n / force_scale_n)^2 and poi_error_m / poi_scale_m.
 
-**Termination**: the hold completed: success when it met the inspection bar by the truth
+**Termination**: the hold completed (every task of the plan ended; the one touch: its
+hold), not the retreat and landing after it: success when it met the inspection bar by the truth
 (:func:`uav_tilt_tools.task_metrics.missed_bar`), else a failure, ``off_target`` or
 ``force_off_setpoint``; a failsafe of the mission (force limit, no
 contact, target lost, stale odometry, upset), the contact lost in HOLD, a push above the force
 limit, the vehicle below ``ground_clearance_m`` near the wall or tilted past
 ``max_tilt_deg``: each a failure, rewarded ``-failure_penalty``. Truncation after
-``episode_s`` of simulated time. ``info`` has the world seed, the mode and phase, the
-push and POI error, and at the end the ``outcome``.
+``episode_s`` of simulated time at the wall (from the episode's start; with
+``start='takeoff'`` from the mission's arrival at the wall, and before it after
+``flight_in_s``). ``info`` has the world seed, the mode and phase, the push and POI error,
+and at the end the ``outcome``. ``reset`` takes no options.
 """
 import dataclasses
 import math
@@ -80,7 +85,8 @@ LIMIT_M, LIMIT_M_S, LIMIT_N, LIMIT_NM = 20.0, 20.0, 200.0, 20.0   # observation 
 class ContactEnvConfig:
     """Options of ContactInspection-v0 (``gymnasium.make(ENV_ID, **options)``)."""
 
-    action_rate_hz: float = param(30.0, lo=1.0, hi=300.0)  # a whole number of control ticks
+    action_rate_hz: float = param(30.0, lo=1.0, hi=300.0,
+                                  doc='the control rate (300 Hz) over a whole number of ticks')
     start: str = param('wall', choices=STARTS)          # where an episode begins
     camera: bool = param(False)                         # the camera image in the observation
     target_source: str = param('ground_truth', choices=TARGET_SOURCES)
@@ -88,7 +94,7 @@ class ContactEnvConfig:
     detector_threads: int = param(1, lo=0, hi=256)      # 0: the libraries' defaults
     max_offset_m: float = param(0.1, lo=0.0, hi=1.0)    # along the wall
     max_force_offset_n: float = param(3.0, lo=0.0, hi=20.0)
-    episode_s: float = param(40.0, lo=0.1, hi=600.0)
+    episode_s: float = param(40.0, lo=0.1, hi=600.0)    # at the wall
     flight_in_s: float = param(150.0, lo=1.0, hi=600.0)  # to reach the wall, else a redraw
     max_redraws: int = param(5, lo=0, hi=100)
     force_scale_n: float = param(5.0, lo=0.01, hi=100.0)
@@ -125,6 +131,9 @@ class ContactInspectionEnv(gym.Env):
         self.plant_config = PlantCoreConfig()
         control_hz = self.plant_config.control_hz
         self.ticks_per_step = max(1, int(round(control_hz / cfg.action_rate_hz)))
+        if not math.isclose(self.ticks_per_step * cfg.action_rate_hz, control_hz):
+            raise ConfigError(f"parameter 'action_rate_hz' = {cfg.action_rate_hz!r} must divide "
+                              f"the control rate {control_hz:g} Hz into whole ticks")
         self.metadata = dict(self.metadata, render_fps=control_hz / self.ticks_per_step)
         self.action_space = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
         obs = dict(error_t=spaces.Box(np.float32([-LIMIT_M] * 3 + [-LIMIT_M_S] * 3),
@@ -148,6 +157,9 @@ class ContactInspectionEnv(gym.Env):
     def reset(self, *, seed=None, options=None):
         """Draw a world, fly the mission to the wall; the first observation there."""
         super().reset(seed=seed)
+        if options:
+            raise ValueError(f'reset options {options!r}: this environment takes none (its '
+                             f'options are gymnasium.make keywords)')
         cfg = self.cfg
         for redraws in range(cfg.max_redraws + 1):
             world_seed = int(self.np_random.integers(0, 2**31 - 1))
@@ -156,13 +168,22 @@ class ContactInspectionEnv(gym.Env):
         else:
             raise RuntimeError(f'the mission reached no wall in {cfg.max_redraws + 1} draws '
                                f'(last world seed {world_seed})')
-        self._t0_s = self.flight.t_s
-        self._info = dict(world_seed=world_seed, redraws=redraws, flight_in_s=self._t0_s)
+        # the time at the wall counts from here; with start='takeoff' from the arrival
+        self._t0_s = self.flight.t_s if cfg.start == 'wall' else None
+        self._info = dict(world_seed=world_seed, redraws=redraws, flight_in_s=self.flight.t_s)
         return self._observation(), self._step_info()
 
     def step(self, action):
         """Hold the setpoint offset of ``action`` over the ticks of one step."""
-        a = np.clip(np.asarray(action, dtype=float).reshape(3), -1.0, 1.0)
+        if self.flight is None:
+            raise gym.error.ResetNeeded('step() before reset() (or after close())')
+        try:
+            a = np.asarray(action, dtype=float).reshape(3)
+        except (TypeError, ValueError):
+            raise ValueError(f'action {action!r}: expected 3 numbers in [-1, 1]') from None
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f'action {a.tolist()} is not finite')
+        a = np.clip(a, -1.0, 1.0)
         cfg, flight = self.cfg, self.flight
         k_z = flight.core.flight.impedance.gains(contact=True)[0][2]
         self._offset_t = np.array([a[0] * cfg.max_offset_m, a[1] * cfg.max_offset_m,
@@ -170,6 +191,8 @@ class ContactInspectionEnv(gym.Env):
         reward, outcome = 0.0, None
         for _ in range(self.ticks_per_step):
             flight.step()
+            if self._t0_s is None and flight.core.mission.mode == Mode.CONTACT:
+                self._t0_s = flight.t_s
             reward += self._tick_reward()
             outcome = self._outcome()
             if outcome is not None:
@@ -178,7 +201,9 @@ class ContactInspectionEnv(gym.Env):
         terminated = outcome is not None
         if terminated and outcome != 'success':
             reward -= cfg.failure_penalty
-        truncated = not terminated and flight.t_s - self._t0_s >= cfg.episode_s
+        truncated = not terminated and (
+            flight.t_s >= cfg.flight_in_s if self._t0_s is None
+            else flight.t_s - self._t0_s >= cfg.episode_s)
         info = self._step_info()
         if terminated or truncated:
             info['outcome'] = outcome or 'time_limit'
@@ -262,12 +287,16 @@ class ContactInspectionEnv(gym.Env):
         """None while the touch goes on, else 'success' or what ended it."""
         flight, cfg = self.flight, self.cfg
         status = flight.status
-        if status.get('inspection_completed'):   # judged on the truth, as the campaign does
-            from uav_tilt_tools.inprocess import mission_result
-            from uav_tilt_tools.task_metrics import first_missed_bar
-            return first_missed_bar(mission_result(flight)['tasks']) or 'success'
         if status.get('failsafe_reason'):
             return status['failsafe_reason']
+        records = flight.core.mission.records
+        if records and all(r.success is not None for r in records):
+            # every task ended (the one touch: its hold), judged on the truth as the
+            # campaign judges it
+            from uav_tilt_tools.inprocess import mission_result
+            from uav_tilt_tools.task_metrics import first_missed_bar
+            failed = next((r.reason or 'task_failed' for r in records if not r.success), None)
+            return failed or first_missed_bar(mission_result(flight)['tasks']) or 'success'
         if status.get('contact_lost'):
             return 'contact_lost'
         if flight.log[-1]['push_n'] > cfg.controller.mission.force_limit_n:
