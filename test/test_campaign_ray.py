@@ -2,6 +2,8 @@
 even when a worker dies under a run (Ray runs the task again)."""
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 
@@ -73,3 +75,16 @@ def test_a_worker_killed_mid_run_still_counts_every_run_once(local):
     assert result['n'] == N and [r['index'] for r in result['runs']] == list(range(N))
     # the run that lost its worker was flown again from its seed: the same result
     assert [comparable(r) for r in result['runs']] == [comparable(r) for r in local['runs']]
+
+
+@pytest.mark.parametrize('address, code, words', [
+    ('garbage::x', 2, "expected 'auto' or HOST:PORT"),
+    ('127.0.0.1:1', 1, 'no Ray there'),       # nothing listens: refused at once
+])
+def test_an_address_without_a_cluster_is_one_line(tmp_path, address, code, words):
+    out = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.cli', 'campaign', '--n', '1',
+                          '--backend', 'ray', '--address', address], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    said = [line for line in out.stderr.splitlines() if line.startswith('uav-tilt campaign:')]
+    assert out.returncode == code and 'Traceback' not in out.stderr, out.stderr
+    assert len(said) == 1 and words in said[0], out.stderr

@@ -10,9 +10,14 @@ campaign as it would locally.
 """
 import logging
 import os
+import socket
+
+from uav_tilt_common.config import ConfigError
 
 MAX_RETRIES = 3
 OBJECT_STORE_BYTES = 256 * 2**20    # results are kB, recordings ~10 MB, fetched at once
+# ray.init keeps trying an address that does not answer; a campaign says so instead
+CONNECT_TIMEOUT_S = 10.0
 
 
 class CampaignError(RuntimeError):
@@ -32,7 +37,7 @@ def ray_runs(run_one, jobs, workers=None, address=None):
         # campaigns run on clusters without internet access: no usage reports
         os.environ.setdefault('RAY_USAGE_STATS_ENABLED', '0')
         if address is not None:
-            ray.init(address=address, logging_level=logging.WARNING)
+            _connect(ray, address)
         else:
             _init_local(ray, workers or os.cpu_count() or 1)
     task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(run_one)
@@ -55,6 +60,25 @@ def ray_runs(run_one, jobs, workers=None, address=None):
             ray.cancel(ref, force=True)
         if started:
             ray.shutdown()
+
+
+def _connect(ray, address):
+    """Join the cluster at ``address`` ('auto', HOST:PORT or ray://HOST:PORT): a malformed
+    address is a ConfigError, one that does not answer within CONNECT_TIMEOUT_S or that
+    Ray refuses a CampaignError, each one line."""
+    if address != 'auto':
+        host, sep, port = address.removeprefix('ray://').rpartition(':')
+        if not (sep and host and port.isdigit()):
+            raise ConfigError(f"--address {address!r}: expected 'auto' or HOST:PORT")
+        try:
+            socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S).close()
+        except OSError as err:
+            raise CampaignError(f'--address {address}: no Ray there ({err})') from None
+    try:
+        ray.init(address=address, logging_level=logging.WARNING)
+    except (ConnectionError, ValueError, RuntimeError) as err:
+        reason = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise CampaignError(f'--address {address}: {reason}') from None
 
 
 def _init_local(ray, cpus):
