@@ -17,6 +17,12 @@ import pytest
      ["'mission.hold_time_s'", '-1.0', '[0.0, 600.0]']),
     ('uav_tilt_vision.vision_node', 'detect_every:=2.5', ["'detect_every'", 'integer']),
     ('uav_tilt_tools.recorder_node', 'flush_period_s:=often', ["'flush_period_s'", 'often']),
+    # files the node would write only at exit, or cannot make at all
+    ('uav_tilt_sim.plant_node', 'summary_file:=/nonexistent/dir/timing.json',
+     ["'summary_file'", 'No such file']),
+    ('uav_tilt_tools.recorder_node', 'output:=/proc/run.mcap', ["'output'", '/proc/run.mcap']),
+    ('uav_tilt_control.controller_node', 'contact_force:=0.5',
+     ["'contact_force'", '0.5', '(1.0, 15.0)']),
 ])
 def test_a_bad_parameter_is_one_line_and_exit_code_2(tmp_path, module, value, words):
     result = subprocess.run([sys.executable, '-m', module, '--ros-args', '-r', '__ns:=/uav',

@@ -2,6 +2,7 @@
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
 
 from ros_graph import Probe, start, status_values, stop
 from uav_tilt_common import names, ros_qos
@@ -50,6 +51,16 @@ def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
         bad.pose.orientation.w = 1.0
         pub.publish(bad)
         logs = (tmp_path / 'plant.log', tmp_path / 'controller.log')
+        # In flight, odometry that is no rotation (all zeros) or older than the last is
+        # rejected and counted; the plant's own goes on and the mission with it.
+        assert probe.spin_until(lambda: 'HOVER' in modes, 120.0), modes
+        odom_pub = probe.node.create_publisher(Odometry, names.ODOM, ros_qos.CONTROL)
+        assert probe.spin_until(lambda: odom_pub.get_subscription_count() > 0, 30.0)
+        for w in (0.0, 1.0):
+            odom = Odometry()       # stamped 0 s, at the origin
+            odom.header.frame_id, odom.child_frame_id = names.FRAME_MAP, names.FRAME_BASE
+            odom.pose.pose.orientation.w = w
+            odom_pub.publish(odom)
         # IDLE may show before the autostart takes effect: the end is IDLE after TAKEOFF.
         done = probe.spin_until(lambda: 'TAKEOFF' in modes and modes[-1] == 'IDLE', 170.0)
         assert done, (modes, [p.read_text()[-2000:] for p in logs])
@@ -66,5 +77,6 @@ def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
     assert final['contact_lost'] == '0'
     assert final['target_source'] == 'ground_truth'
     assert int(final['rejected_frame']) == 1
+    assert int(final['rejected_quaternion']) == 1 and int(final['rejected_stamp']) == 1
     assert float(final['loop_rate_hz']) > 0.0
     assert code_c == 0 and code_p == 0

@@ -85,6 +85,7 @@ def test_ctrl_c_stops_every_node_cleanly(tmp_path, probe):
     assert not any(alive(pid) for pid in nodes)
     log = log_path.read_text()
     assert '[launch] plant: exit code 0' in log and '[launch] controller: exit code 0' in log
+    assert 'FATAL' not in log and 'Traceback' not in log, log
 
 
 def test_ctrl_c_mid_mission_leaves_a_complete_recording(tmp_path, probe):

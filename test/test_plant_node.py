@@ -157,8 +157,9 @@ def test_realtime_mode_follows_the_wall_clock_and_streams_the_camera(tmp_path, p
         wall0, sim0 = time.monotonic(), float(latest_status(probe)['sim_time_s'])
         probe.spin_until(lambda: False, 3.0)
         wall1, sim1 = time.monotonic(), float(latest_status(probe)['sim_time_s'])
-        # paced, not free-running; a loaded host may fall short of 1x (it says so)
-        assert 0.3 * (wall1 - wall0) < sim1 - sim0 < 1.0 * (wall1 - wall0) + 0.3
+        # paced, not free-running (several times faster here); a loaded host may fall
+        # short of 1x (it says so), and a status read late stretches the sim time seen
+        assert 0.3 * (wall1 - wall0) < sim1 - sim0 < 1.5 * (wall1 - wall0)
     finally:
         code, _ = stop(plant)
     assert code == 0
@@ -192,6 +193,9 @@ def test_realtime_plant_that_cannot_keep_up_says_so(tmp_path, probe):
     assert code == 0
     log = (tmp_path / 'plant.log').read_text()
     assert 'not keeping up with the wall clock' in log, log
+    # Ctrl-C landed while a tick's callback ran (it always runs, 40x is out of reach): the
+    # spin ends after it, not with the context pulled from under its publishers
+    assert 'FATAL' not in log and 'Traceback' not in log, log
     timing = json.loads(summary.read_text())
     assert timing['mode'] == 'realtime' and timing['late_commands'] == 5
     assert timing['dropped_ticks'] > 0 and 0.0 < timing['rtf'] < 40.0

@@ -12,10 +12,13 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 
 from uav_tilt_common import parent_watch
 from uav_tilt_common.config import ConfigError, ConfigT, check_field, check_value, \
     description, fields_flat, from_dict, replace_flat
+from uav_tilt_common.ros_spin import spin_events
 
 INT64 = (-2**63, 2**63 - 1)
 _ARRAY_TYPES: dict[type | None, Parameter.Type] = {
@@ -129,34 +132,29 @@ def _plain(value):
     return list(value) if isinstance(value, (array.array, tuple)) else value
 
 
-def run_node(node_factory: Callable[[], Node], args: list[str] | None = None,
-             spin: Callable[[Node], None] | None = None) -> int:
-    """Create the node, serve it with ``spin(node)`` (default ``rclpy.spin``, see
-    :mod:`uav_tilt_common.ros_spin`) and shut down cleanly (the ros2/demos pattern).
+def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Create the node, serve it (:func:`uav_tilt_common.ros_spin.spin_events`) until a
+    stop signal, and shut down cleanly (the ros2/demos pattern).
 
+    SIGINT and SIGTERM are this function's, not rclpy's: rclpy's handlers shut the context
+    down at once, under whatever callback runs, whose next publish then raises and is
+    logged by the executor as FATAL with its stack; here the spin ends between callbacks.
     A bad parameter ends the process with exit code 2 and one log line. Started by
     scripts/launch.sh, the node also ends when the script does (:mod:`parent_watch`).
     """
     parent_watch.die_with_parent()
-    interrupted = note_sigint()
-    rclpy.init(args=args)
+    stop = note_stop_signals()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
     try:
         node = node_factory()
-        (spin or rclpy.spin)(node)
+        spin_events(node, stop)
     except ConfigError as err:
         print(f'[FATAL] {err}', file=sys.stderr, flush=True)
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except RuntimeError:
-        # A signal shuts the context down under the executor: a callback that publishes
-        # then raises RCLError, a message take a pybind RuntimeError. Neither is an error.
-        # The KeyboardInterrupt can also land inside a take before the context is down,
-        # and pybind turns it into a RuntimeError too.
-        if rclpy.ok() and not interrupted:
-            raise
+        pass        # a handler set before ours raised, or the context was shut down
     finally:
         if node is not None:
             node.destroy_node()
@@ -164,15 +162,22 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None,
     return code
 
 
-def note_sigint() -> list[int]:
-    """A list that gets the signal number when SIGINT arrives; the Python handler before
-    still runs. Call before rclpy.init, whose signal handler then chains to this one."""
-    seen, previous = [], signal.getsignal(signal.SIGINT)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    def handler(signum, frame):
-        seen.append(signum)
-        if callable(previous):
-            previous(signum, frame)
 
-    signal.signal(signal.SIGINT, handler)
-    return seen
+def note_stop_signals() -> Future:
+    """A future done with the number of the first SIGINT or SIGTERM that arrives. A
+    Python handler set before still runs, but for Python's default SIGINT one: its
+    KeyboardInterrupt would land in whatever callback runs."""
+    stop = Future()
+    for number in STOP_SIGNALS:
+        previous = signal.getsignal(number)
+
+        def handler(signum, frame, previous=previous):
+            if not stop.done():
+                stop.set_result(signum)
+            if callable(previous) and previous is not signal.default_int_handler:
+                previous(signum, frame)
+
+        signal.signal(number, handler)
+    return stop

@@ -11,13 +11,15 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from rclpy.node import Node
+    from rclpy.task import Future
 
 # How long a wait may block: the latency of noticing that the context was shut down.
 WAIT_S = 0.1
 
 
-def spin_events(node: 'Node') -> None:
-    """Serve ``node`` with rclpy's EventsExecutor until its context shuts down.
+def spin_events(node: 'Node', until: 'Future | None' = None) -> None:
+    """Serve ``node`` with rclpy's EventsExecutor until the future ``until`` is done (a
+    stop signal, between callbacks) or the context shuts down.
 
     In rclpy 7.1 ``EventsExecutor.spin()`` busy-waits (a core at 100% with nothing to do)
     and misses the shutdown; spin_once returns to Python after every callback. Bounded
@@ -27,9 +29,9 @@ def spin_events(node: 'Node') -> None:
     from rclpy.task import Future
     executor = EventsExecutor(context=node.context)
     executor.add_node(node)
-    never = Future()
+    until = Future() if until is None else until
     try:
-        while node.context.ok():
-            executor.spin_until_future_complete(never, timeout_sec=WAIT_S)
+        while node.context.ok() and not until.done():
+            executor.spin_until_future_complete(until, timeout_sec=WAIT_S)
     finally:
         executor.shutdown()

@@ -119,6 +119,11 @@ class ControllerCore:
 
     # ---- inputs ----
 
+    @property
+    def odometry(self) -> VehicleState | None:
+        """The last odometry taken, or None."""
+        return self._odom
+
     def on_odometry(self, state: VehicleState):
         """Mocap-like odometry (map -> base_link); also feeds the estimator's pose history."""
         self._odom = state

@@ -32,7 +32,6 @@ from uav_tilt_common.config import nested, param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.ros_recorder import recorder_listens
-from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 
@@ -42,6 +41,9 @@ STATS_WINDOW = 3000
 STATS_PERIOD_S = 1.0
 # An IMU stamp gap outside (0, MAX_DT_S] is a restart or a stall: use the nominal period.
 MAX_DT_S = 0.1
+# A quaternion shorter than this is no rotation (all zeros, a default-made message); one
+# longer is normalised.
+MIN_QUATERNION_NORM = 0.5
 
 
 @dataclasses.dataclass
@@ -132,6 +134,15 @@ class ControllerNode(Node):
             return False
         return True
 
+    def _unit(self, q, what):
+        """Quaternion ``q`` normalised, or None (rejected and counted) when it is no
+        rotation."""
+        norm = float(np.linalg.norm(q))
+        if norm < MIN_QUATERNION_NORM:
+            self._reject('quaternion', f'{what} with a quaternion of norm {norm:.3g}')
+            return None
+        return np.asarray(q, dtype=float) / norm
+
     def _decoded(self, decode, data, what):
         """``decode(data)``, or None (rejected) for a malformed message."""
         try:
@@ -151,9 +162,19 @@ class ControllerNode(Node):
         if child != names.FRAME_BASE:
             self._reject('frame', f'odom with child frame {child!r}')
             return
-        if self._finite([*state.p_map.tolist(), *state.q_map_base.tolist(),
-                         *state.v_map.tolist()], 'odom'):
-            self.core.on_odometry(state)
+        if not self._finite([*state.p_map.tolist(), *state.q_map_base.tolist(),
+                             *state.v_map.tolist()], 'odom'):
+            return
+        q = self._unit(state.q_map_base, 'odom')
+        if q is None:
+            return
+        last = self.core.odometry
+        if last is not None and state.t_s < last.t_s:
+            # the pose history and the estimator's look-ups run forward in time
+            self._reject('stamp', f'odom stamped {state.t_s:.4f} s, before the last '
+                                  f'{last.t_s:.4f} s')
+            return
+        self.core.on_odometry(dataclasses.replace(state, q_map_base=q))
 
     def on_wrench(self, data):
         """F/T sensor at the tool, ee_link (serialized)."""
@@ -192,8 +213,11 @@ class ControllerNode(Node):
         """Evaluation mode: the true pose in map of target ``target_id``."""
         p_map, q_map_t = _pose_arrays(msg.pose)
         topic = names.ground_truth_target(target_id)
-        if self._frame_ok(msg.header.frame_id, names.FRAME_MAP, topic) and self._finite(
-                np.concatenate([p_map, q_map_t]), topic):
+        if not (self._frame_ok(msg.header.frame_id, names.FRAME_MAP, topic) and self._finite(
+                np.concatenate([p_map, q_map_t]), topic)):
+            return
+        q_map_t = self._unit(q_map_t, topic)
+        if q_map_t is not None:
             self.core.on_ground_truth_target(p_map, q_map_t, target_id)
 
     def on_setpoint(self, msg):
@@ -202,8 +226,8 @@ class ControllerNode(Node):
         if not (self._frame_ok(msg.header.frame_id, names.FRAME_MAP, 'setpoint/pose')
                 and self._finite(np.concatenate([p_map, q]), 'setpoint/pose')):
             return
-        if np.linalg.norm(q) < 0.5:
-            self._reject('quaternion', 'setpoint/pose with a zero quaternion')
+        q = self._unit(q, 'setpoint/pose')
+        if q is None:
             return
         yaw = Rotation.from_quat(q).as_euler('ZYX')[0]
         _, message = self.core.set_setpoint(p_map, yaw)
@@ -304,7 +328,7 @@ def _loop_stats(periods_s, compute_s, nominal_dt_s):
 
 def main(args=None):
     """Entry point of the controller_node executable."""
-    return run_node(ControllerNode, args, spin=spin_events)
+    return run_node(ControllerNode, args)
 
 
 if __name__ == '__main__':

@@ -26,11 +26,10 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
 
 from uav_tilt_common import cdr, names, ros_msgs, ros_qos
-from uav_tilt_common.config import param
+from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.ros_recorder import recorder_listens
-from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.state import ActuatorCommand
 from uav_tilt_sim.command_check import check_command
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
@@ -78,6 +77,13 @@ class PlantNode(Node):
     def __init__(self):
         super().__init__('plant')
         self.cfg = declare_config(self, PlantNodeConfig, DYNAMIC, self._on_parameters)
+        if self.cfg.summary_file:
+            # made now, so that a path it cannot be written to stops the start, not the exit
+            try:
+                open(self.cfg.summary_file, 'w', encoding='utf-8').close()
+            except OSError as err:
+                raise ConfigError(f"parameter 'summary_file' = {self.cfg.summary_file!r}: "
+                                  f"{err.strerror}") from None
         scenario = load_scenario(self.cfg.scenario_file or None)
         self.plant = Plant(self.cfg, scenario, warn=self.get_logger().warn)
         self.camera_every = max(1, int(round(self.cfg.control_hz / self.cfg.camera.rate_hz)))
@@ -397,7 +403,7 @@ class PlantNode(Node):
 
 def main(args=None):
     """Entry point of the plant_node executable."""
-    return run_node(PlantNode, args, spin=spin_events)
+    return run_node(PlantNode, args)
 
 
 if __name__ == '__main__':

@@ -16,7 +16,6 @@ mission cost it 34% of a core with the default executor, 15% with this one.
 """
 import dataclasses
 import os
-import signal
 import sys
 import time
 
@@ -25,9 +24,8 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
 from uav_tilt_common import names
-from uav_tilt_common.config import param
+from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.ros_params import declare_config, run_node
-from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_tools import topic_graph
 from uav_tilt_tools.mcap_bag import McapBag
 
@@ -75,7 +73,11 @@ class RecorderNode(Node):
         self.pending = []       # (topic, data) received before the first /clock
         # The contract's topics are subscribed right after the file is made (launch.sh
         # waits for the file), so before the plant's first tick.
-        self.bag = McapBag(output_path(self.cfg.output))
+        try:
+            self.bag = McapBag(output_path(self.cfg.output))
+        except OSError as err:
+            raise ConfigError(f"parameter 'output' = {self.cfg.output!r}: {err.strerror}") \
+                from None
         for relative, type_name in names.TOPIC_TYPES.items():
             topic = topic_graph.resolve(relative, namespace)
             if self.wanted(topic):
@@ -166,11 +168,8 @@ class RecorderNode(Node):
 
 def main(args=None):
     """Entry point of the recorder_node executable."""
-    # rclpy's SIGINT handler shuts the context down and then calls the Python handler; a
-    # no-op there keeps KeyboardInterrupt from landing inside a half-written MCAP record,
-    # and spin returns between callbacks instead.
-    signal.signal(signal.SIGINT, lambda *_: None)
-    return run_node(RecorderNode, args, spin=spin_events)
+    # (run_node's spin ends between callbacks, never inside a half-written MCAP record)
+    return run_node(RecorderNode, args)
 
 
 if __name__ == '__main__':

@@ -26,7 +26,6 @@ from uav_tilt_common import cdr, names, resources, ros_msgs, ros_qos
 from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
-from uav_tilt_common.ros_spin import spin_events
 from uav_tilt_common.targets import no_target_covariance
 from uav_tilt_vision.backends import BACKENDS, OnnxDetector, TorchDetector, load_detector
 from uav_tilt_vision.pipeline import STAGES, STATS_WINDOW, FrameResult, VisionConfig, \
@@ -233,7 +232,7 @@ class VisionNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the vision_node executable."""
-    return run_node(VisionNode, args, spin=spin_events)
+    return run_node(VisionNode, args)
 
 
 if __name__ == '__main__':
