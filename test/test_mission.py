@@ -283,7 +283,12 @@ def test_nan_setpoint_rejected_and_counted():
     assert not ok and msg
     ok, _ = flight.mission.set_hover_setpoint([0.0, 0.0, 2.0], np.inf)
     assert not ok
-    assert flight.mission.status['rejected_setpoints'] == 2
+    # under ground, or low enough for the landing detector to call it landed
+    cfg = flight.mission.config
+    for z in (-50.0, cfg.ground_z_m + 1.9 * cfg.land_detect_height_m):
+        ok, msg = flight.mission.set_hover_setpoint([0.0, 0.0, z], 0.0)
+        assert not ok and 'lowest hover' in msg, msg
+    assert flight.mission.status['rejected_setpoints'] == 4
     assert flight.mission.mode == Mode.HOVER
     ok, _ = flight.mission.set_hover_setpoint([1.0, -1.0, 2.0], 0.5)
     assert ok

@@ -114,3 +114,9 @@ def test_planes_cross_the_wire_and_bad_ones_are_refused():
     candidates = ros_msgs.candidates_msg([], ros_msgs.to_stamp(0.0))
     with pytest.raises(ValueError, match='layout'):
         ros_msgs.planes_of_msg(candidates)
+    # the right fields at other offsets (a reader by name would take them in another order)
+    shuffled = ros_msgs.planes_msg(planes, ros_msgs.to_stamp(1.5))
+    for field, offset in zip(shuffled.fields, reversed([f.offset for f in shuffled.fields])):
+        field.offset = offset
+    with pytest.raises(ValueError, match='offsets'):
+        ros_msgs.planes_of_msg(shuffled)

@@ -278,10 +278,12 @@ def _cloud_msg(rows, fields, stamp, frame_id):
 def _cloud_rows(msg, fields):
     """The float32 rows of a :func:`_cloud_msg` PointCloud2; ValueError on another layout."""
     names_ = tuple(f.name for f in msg.fields)
-    if names_ != fields or any(f.datatype != PointField.FLOAT32 for f in msg.fields) \
+    if names_ != fields or any(f.datatype != PointField.FLOAT32 or f.count != 1
+                               or f.offset != 4 * i for i, f in enumerate(msg.fields)) \
             or msg.point_step != 4 * len(fields) \
             or len(msg.data) != msg.point_step * msg.width * msg.height:
-        raise ValueError(f'unexpected point layout: fields {names_}, '
+        offsets = tuple(f.offset for f in msg.fields)
+        raise ValueError(f'unexpected point layout: fields {names_} at offsets {offsets}, '
                          f'point_step {msg.point_step}, {len(msg.data)} bytes')
     dtype = np.dtype('>f4' if msg.is_bigendian else '<f4')
     return np.frombuffer(bytes(msg.data), dtype=dtype)

@@ -56,11 +56,14 @@ def candidates_to_array(candidates: Iterable[TargetCandidate]) -> NDArray[np.flo
 
 
 def candidates_from_array(rows: ArrayLike) -> list[TargetCandidate]:
-    """The candidates of :func:`candidates_to_array` rows; ValueError on a non-finite one."""
+    """The candidates of :func:`candidates_to_array` rows; ValueError on a non-finite one
+    or one whose normal is not a unit vector (vision/planes' rule)."""
     out = []
     for row in np.asarray(rows, dtype=float).reshape(-1, len(CANDIDATE_FIELDS)):
         if not np.all(np.isfinite(row)):
             raise ValueError('non-finite candidate')
+        if abs(np.linalg.norm(row[3:6]) - 1.0) > 1e-3:
+            raise ValueError(f'candidate normal {row[3:6]} is not a unit vector')
         cov = np.zeros((3, 3))
         for (i, j), value in zip(_UPPER, row[6:12]):
             cov[i, j] = cov[j, i] = value

@@ -483,9 +483,19 @@ class Mission:
         if self._mode != Mode.HOVER or self._flight_phase:
             return False, f'setpoints are accepted in HOVER only, not {self._mode.value}' + (
                 f' ({self._flight_phase})' if self._flight_phase else '')
+        lowest_m = self._lowest_hover_m()
+        if p[2] < lowest_m:
+            self.rejected_setpoints += 1
+            return False, (f'setpoint z {p[2]:g} m is below the lowest hover, {lowest_m:g} m '
+                           f'(ground_z_m + 2 land_detect_height_m; land to go lower)')
         self._plan(p, self.config.hover_speed_m_s)
         self._yaw_goal = float(yaw_rad)
         return True, 'setpoint accepted'
+
+    def _lowest_hover_m(self):
+        """The lowest altitude the mission hovers or searches at: twice the landing
+        detector's height above the ground, clear of it."""
+        return self.config.ground_z_m + 2.0 * self.config.land_detect_height_m
 
     # ---- the tick ----
 
@@ -574,7 +584,7 @@ class Mission:
         elif task.hint_map is not None and task.normal_map is not None:
             # look at where the plan says the target is, facing the wall, then search
             look = task.hint_map + task.normal_map * cfg.look_distance_m
-            look[2] = max(look[2], cfg.ground_z_m + 2.0 * cfg.land_detect_height_m)
+            look[2] = max(look[2], self._lowest_hover_m())
             if self._mode != Mode.HOVER:
                 self._enter(Mode.HOVER, f'task {index}: to its target')
             self._flight_phase = 'transit'
@@ -788,8 +798,7 @@ class Mission:
     def _search_altitudes_m(self):
         """The altitudes SEARCH turns at, in turn: takeoff, higher, lower."""
         cfg = self.config
-        low = max(cfg.takeoff_altitude_m - cfg.search_descend_m,
-                  cfg.ground_z_m + 2.0 * cfg.land_detect_height_m)
+        low = max(cfg.takeoff_altitude_m - cfg.search_descend_m, self._lowest_hover_m())
         return (cfg.takeoff_altitude_m, cfg.takeoff_altitude_m + cfg.search_climb_m, low)
 
     def _tick_confirm(self, target):
