@@ -59,7 +59,7 @@ while (($#)); do
             shift 2 ;;
         --vision-only) vision_only=1; shift ;;
         --param)
-            [[ ${2:-} =~ ^(plant|controller|vision|recorder|foxglove)\.[A-Za-z0-9_.]+:= ]] \
+            [[ ${2:-} =~ ^(plant|controller|vision|recorder|foxglove)\.[A-Za-z0-9_.]+:=.+ ]] \
                 || die "--param: NODE.NAME:=VALUE with NODE one of plant, controller, vision, recorder, foxglove"
             PARAMS+=("$2")
             shift 2 ;;
@@ -72,6 +72,10 @@ if [[ $mission == plan && -z $plan ]] || [[ -n $plan && $mission != plan ]]; the
     die '--mission plan and --plan FILE go together'
 fi
 [[ -z $plan || -f $plan ]] || die "--plan: no file $plan"
+if [[ -n $record ]]; then
+    { mkdir -p -- "$record" && [[ -w $record ]]; } 2>/dev/null \
+        || die "--record: cannot write to the directory $record"
+fi
 if ((vision_only)) && [[ -n $record$mission$scenario$target_source ]] \
         || ((vision_only && (foxglove || !vision || realtime))); then
     die '--vision-only starts vision alone: it takes no other option but --param'
@@ -172,7 +176,6 @@ if ((vision_only)); then
     start vision
 fi
 if [[ -n $record ]]; then
-    mkdir -p "$record"
     resolve recorder_node uav_tilt_tools.recorder_node
     ros_args recorder
     CMD+=(-p "output:=$record")

@@ -1,6 +1,6 @@
-"""`uav-tilt fly` and `campaign` refuse what they cannot fly with one line and exit code 2
-before flying anything (DESIGN section 5-7), and fly what they can: a world without a
-target, and every summary.json key."""
+"""`uav-tilt fly`, `campaign` and `bench` refuse what they cannot run with one line and exit
+code 2 before running anything (DESIGN section 5-7), and fly what they can: a world
+without a target, and every summary.json key."""
 import pytest
 import yaml
 
@@ -90,6 +90,8 @@ def test_a_bad_controller_setting_is_one_line(capsys, args, words):
     (['campaign', '--workers', '-2'], ['--workers']),
     (['campaign', '--seed', '-1'], ['--seed']),
     (['campaign', '--duration', 'inf'], ['--duration']),
+    (['bench', 'sim', '--seconds', 'nan'], ['--seconds']),
+    (['bench', 'control', '--seconds', '0'], ['--seconds']),
 ])
 def test_a_bad_option_value_is_refused_by_the_parser(capsys, argv, words):
     code, out, err = refusal(capsys, argv)

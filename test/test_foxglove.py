@@ -114,3 +114,17 @@ def test_without_foxglove_sdk_the_node_exits_0_with_one_line():
     assert result.returncode == 0
     assert [line for line in result.stderr.splitlines() if 'foxglove' in line] == [
         '[foxglove] foxglove-sdk is not installed (pip install foxglove-sdk): no live view']
+
+
+def test_a_port_in_use_is_one_line_and_exit_2(tmp_path):
+    pytest.importorskip('foxglove')
+    with socket.socket() as taken:
+        taken.bind(('127.0.0.1', 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.foxglove_bridge',
+                                 '--ros-args', '-p', f'port:={port}'], cwd=REPO,
+                                capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and 'Traceback' not in result.stderr, result.stderr
+    fatal = [line for line in result.stderr.splitlines() if 'FATAL' in line]
+    assert len(fatal) == 1 and f"'port' = {port}" in fatal[0], result.stderr

@@ -223,11 +223,16 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
           f'camera {counts} of {frames_published}; summary {summary}')
 
 
-def test_bad_arguments_start_nothing(tmp_path):
-    result = subprocess.run([LAUNCH, '--mission', 'survey'], cwd=tmp_path,
-                            capture_output=True, text=True, timeout=30)
-    assert result.returncode == 2
-    assert "--mission: 'inspect' or 'plan'" in result.stderr
+@pytest.mark.parametrize('args, words', [
+    (['--mission', 'survey'], "--mission: 'inspect' or 'plan'"),
+    (['--param', 'controller.contact_force:='], '--param: NODE.NAME:=VALUE'),
+    (['--no-vision', '--record', '/proc/run'], '--record: cannot write'),
+])
+def test_bad_arguments_start_nothing(tmp_path, args, words):
+    result = subprocess.run([LAUNCH, *args], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=30)
+    assert result.returncode == 2 and words in result.stderr, result.stderr
+    assert 'Traceback' not in result.stderr and 'FATAL' not in result.stderr
 
 
 @pytest.mark.parametrize('modes, success, result', [

@@ -1,5 +1,6 @@
 """`uav-tilt topic list|echo|hz` against a live plant (realtime, so rates are wall rates)."""
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -87,3 +88,30 @@ def test_hz_matches_the_rate_the_plant_reports(plant):
 def test_unknown_topic_fails_with_a_message(plant):
     code, out = cli('topic', 'echo', 'no/such/topic', '--once', '--timeout', '1')
     assert code == 1 and 'did not appear' in out
+
+
+@pytest.mark.parametrize('verb, code, words', [
+    # echo goes on until Ctrl-C, which ends it as `ros2 topic echo` ends
+    (['echo', 'imu'], 0, 'frame_id'),
+    # hz stopped before its window prints the rate so far
+    (['hz', 'imu', '--window', '60'], 0, 'average rate'),
+    # Ctrl-C while waiting for a topic that never comes
+    (['echo', 'no/such/topic', '--timeout', '60'], 130, ''),
+])
+def test_ctrl_c_ends_the_command_cleanly(plant, verb, code, words):
+    proc = subprocess.Popen([*CLI, 'topic', *verb], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(8.0)     # started, subscribed, and messages taken
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=20)
+    assert proc.returncode == code and 'Traceback' not in err, err
+    assert words in out
+
+
+@pytest.mark.parametrize('args', [
+    ['echo', 'imu', '--timeout', 'nan'], ['echo', 'imu', '-n', '0'],
+    ['hz', 'imu', '--window', '-1'], ['list', '--wait', 'inf'], ['echo', 'bad topic!'],
+])
+def test_a_bad_option_value_is_refused(args):
+    code, _ = cli('topic', *args)
+    assert code == 2

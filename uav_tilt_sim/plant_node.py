@@ -135,7 +135,7 @@ class PlantNode(Node):
             self.create_timer(0.05, self.on_watchdog)
         self.create_timer(1.0 / self.cfg.status_rate_hz, self.on_status)
         self.get_logger().info(
-            f'plant up: mode={self.cfg.mode} rtf={self.cfg.rtf} '
+            f'plant up: mode={self.cfg.mode} rtf={self.target_rtf} '
             f'scenario={self.cfg.scenario_file or "default"} camera={self.cfg.camera_enabled}')
 
     def _free_rtf(self):

@@ -4,6 +4,8 @@ object on stdout (DESIGN section 7). ``slide`` is an accuracy bench
 import json
 import os
 
+from uav_tilt_tools import cli_args
+
 
 def _sim(seconds):
     from uav_tilt_tools.bench_sim import bench_sim
@@ -55,7 +57,7 @@ def register(sub):
     """Add the `bench` sub-command."""
     parser = sub.add_parser('bench', help='speed measurements, one JSON object on stdout')
     parser.add_argument('what', choices=sorted(BENCHES))
-    parser.add_argument('--seconds', type=float, default=None,
+    parser.add_argument('--seconds', type=cli_args.duration_s, default=None,
                         help='length of each measurement (default: 30 s control, 20 s of '
                              'simulated time graph, the whole mission campaign*, else 10 s; '
                              'slide flies whole slides)')

@@ -23,7 +23,7 @@ from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import String
 
 from uav_tilt_common import names, ros_msgs, ros_qos
-from uav_tilt_common.config import param
+from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.targets import is_no_target
@@ -118,8 +118,11 @@ class FoxgloveBridge(Node):
         self.cfg = declare_config(self, FoxgloveConfig)
         self.vehicle = VehicleParams()
         self.scenario = load_scenario(self.cfg.scenario_file or None)
-        self.server = foxglove.start_server(name='uav_tilt', host=HOST, port=self.cfg.port,
-                                            capabilities=[Capability.Time])
+        try:
+            self.server = foxglove.start_server(name='uav_tilt', host=HOST, port=self.cfg.port,
+                                                capabilities=[Capability.Time])
+        except RuntimeError as err:     # the port taken: another bridge or app has it
+            raise ConfigError(f"parameter 'port' = {self.cfg.port}: {err}") from None
         self.ch_image = channels.RawImageChannel(NS + 'camera')
         self.ch_scene = channels.SceneUpdateChannel(NS + 'scene')
         self.ch_tf = channels.FrameTransformsChannel(NS + 'tf')

@@ -2,13 +2,19 @@
 
 Topic names are absolute or relative to /uav; ROS_DOMAIN_ID comes from the environment.
 """
+import argparse
 import array
+import signal
 import time
 
 import numpy as np
 
+from uav_tilt_tools import cli_args
+
 # Sequences longer than this print as a count, as image data would flood the terminal.
 MAX_SEQUENCE = 32
+# The exit code of a command Ctrl-C stopped before it had anything to show (128 + SIGINT).
+INTERRUPTED = 130
 
 
 def register(sub):
@@ -16,22 +22,35 @@ def register(sub):
     parser = sub.add_parser('topic', help='list, echo and measure topics of the running graph')
     verbs = parser.add_subparsers(dest='verb', required=True)
     listing = verbs.add_parser('list', help='topic names and types')
-    listing.add_argument('--wait', type=float, default=3.0,
+    listing.add_argument('--wait', type=cli_args.duration_s, default=3.0,
                          help='seconds of discovery at least (no daemon keeps the graph)')
     listing.set_defaults(func=run_list)
     echo = verbs.add_parser('echo', help='print messages as YAML')
-    echo.add_argument('topic')
+    echo.add_argument('topic', type=topic_name)
     count = echo.add_mutually_exclusive_group()
     count.add_argument('--once', action='store_const', const=1, dest='n')
-    count.add_argument('-n', type=int, help='stop after N messages')
+    count.add_argument('-n', type=cli_args.count, help='stop after N messages')
     echo.set_defaults(func=run_echo)
     hz = verbs.add_parser('hz', help='message rate over a window of wall time')
-    hz.add_argument('topic')
-    hz.add_argument('--window', type=float, default=5.0, help='seconds to listen')
+    hz.add_argument('topic', type=topic_name)
+    hz.add_argument('--window', type=cli_args.duration_s, default=5.0,
+                    help='seconds to listen (Ctrl-C: the rate so far)')
     hz.set_defaults(func=run_hz)
     for verb in (listing, echo, hz):
-        verb.add_argument('--timeout', type=float, default=10.0,
+        verb.add_argument('--timeout', type=cli_args.duration_s, default=10.0,
                           help='seconds to wait for the topic to appear')
+
+
+def topic_name(text):
+    """A topic name, absolute or relative to /uav, that ROS accepts."""
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    from uav_tilt_tools import topic_graph
+    try:
+        validate_full_topic_name(topic_graph.resolve(text))
+    except InvalidTopicNameException as err:
+        raise argparse.ArgumentTypeError(' '.join(str(err).split())) from None
+    return text
 
 
 # --- pure helpers -------------------------------------------------------------------------
@@ -80,12 +99,17 @@ def rate_stats(times_s):
 
 # --- commands -----------------------------------------------------------------------------
 class _Session:
-    """rclpy context and a node, for one command (rclpy only when a topic verb runs)."""
+    """rclpy context and a node, for one command (rclpy only when a topic verb runs).
+    Ctrl-C ends its spin (``interrupted``) instead of raising wherever the command is."""
 
     def __enter__(self):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
-        rclpy.init()
+        from rclpy.signals import SignalHandlerOptions
+        from uav_tilt_common.ros_params import STOP_SIGNALS, note_stop_signals
+        self._handlers = {number: signal.getsignal(number) for number in STOP_SIGNALS}
+        self.stop = note_stop_signals()
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         self.rclpy = rclpy
         self.node = rclpy.create_node('uav_tilt_topic_cli')
         self.executor = SingleThreadedExecutor()
@@ -96,11 +120,18 @@ class _Session:
         self.executor.shutdown()
         self.node.destroy_node()
         self.rclpy.try_shutdown()
+        for number, handler in self._handlers.items():
+            signal.signal(number, handler)
+
+    @property
+    def interrupted(self):
+        return self.stop.done()
 
     def spin_until(self, predicate, timeout_s):
-        """Spin until predicate() holds or the time is up; returns predicate()."""
+        """Spin until predicate() holds, the time is up or Ctrl-C; returns predicate()."""
         deadline = time.monotonic() + timeout_s
-        while not predicate() and time.monotonic() < deadline and self.rclpy.ok():
+        while not (predicate() or self.interrupted) and time.monotonic() < deadline \
+                and self.rclpy.ok():
             self.executor.spin_once(timeout_sec=0.05)
         return predicate()
 
@@ -109,7 +140,8 @@ class _Session:
         from uav_tilt_tools import topic_graph
         name = topic_graph.resolve(topic)
         if not self.spin_until(lambda: name in topic_graph.topic_types(self.node), timeout_s):
-            print(f'topic {name} did not appear within {timeout_s} s')
+            if not self.interrupted:
+                print(f'topic {name} did not appear within {timeout_s} s')
             return None
         type_name = topic_graph.topic_types(self.node)[name]
         qos = topic_graph.subscription_qos(self.node, name, depth=100)
@@ -147,23 +179,26 @@ def run_echo(args):
             printed.append(1)
     with _Session() as session:
         if session.subscribe(args.topic, args.timeout, show) is None:
-            return 1
+            return INTERRUPTED if session.interrupted else 1
         session.spin_until(lambda: args.n is not None and len(printed) >= args.n,
                            float('inf'))
     return 0
 
 
 def run_hz(args):
-    """Listen ``--window`` seconds, then print the rate like `ros2 topic hz`."""
+    """Listen ``--window`` seconds (or until Ctrl-C), then print the rate like `ros2 topic
+    hz`."""
     arrivals = []
     with _Session() as session:
         if session.subscribe(args.topic, args.timeout,
                              lambda _: arrivals.append(time.monotonic())) is None:
-            return 1
+            return INTERRUPTED if session.interrupted else 1
+        start = time.monotonic()
         session.spin_until(lambda: False, args.window)
+        listened_s = time.monotonic() - start
     stats = rate_stats(arrivals)
     if stats is None:
-        print(f'no rate: {len(arrivals)} messages in {args.window} s')
+        print(f'no rate: {len(arrivals)} messages in {listened_s:.1f} s')
         return 1
     print(f"average rate: {stats['rate_hz']:.3f}\n"
           f"\tmin: {stats['min_s']:.5f}s max: {stats['max_s']:.5f}s "
