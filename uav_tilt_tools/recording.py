@@ -15,6 +15,7 @@ import struct
 import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
+from mcap.writer import MCAP0_MAGIC
 from mcap_ros2.decoder import DecoderFactory
 
 from uav_tilt_common import names
@@ -34,10 +35,14 @@ REPORT_PREFIXES = (names.GROUND_TRUTH_TARGETS + '/',)
 TORN_TAIL = (McapError, EOFError, struct.error, ValueError)
 
 
+class NotMcap(ValueError):
+    """A RUN_DIR/*.mcap that is no MCAP file."""
+
+
 def load_recording(run_dir, namespace=names.NAMESPACE, topics=REPORT_TOPICS, notes=None,
                    prefixes=REPORT_PREFIXES):
     """The recording of ``topics`` and of the topics under ``prefixes`` in every
-    RUN_DIR/*.mcap (FileNotFoundError if none).
+    RUN_DIR/*.mcap (FileNotFoundError if none, NotMcap for a file that is no MCAP).
 
     A file without its summary (the recorder was killed) is read up to its last complete
     chunk; one line about it goes to ``notes`` (a list) when given.
@@ -67,6 +72,12 @@ def _read_mcap(path, absolute, under, rec):
     decoders = {}
     factory = DecoderFactory()
     with open(path, 'rb') as stream:
+        # a killed recorder's file has its start and not its end: a file without the start
+        # would otherwise read as an empty, torn recording
+        if stream.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
+            raise NotMcap(f'{path} is not an MCAP file (it does not start with the MCAP '
+                          f'magic)')
+        stream.seek(0)
         try:
             summary, complete = make_reader(stream).get_summary(), True
         except TORN_TAIL:       # no footer where it belongs

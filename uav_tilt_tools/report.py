@@ -14,12 +14,9 @@ has, measured on the wall clock:
 
 Each is the value of the last status recorded; null when that status is not recorded.
 """
-import glob
 import json
 import os
 import sys
-
-from mcap.writer import MCAP0_MAGIC
 
 from uav_tilt_common import names
 from uav_tilt_common.vehicle import VehicleParams
@@ -44,12 +41,9 @@ def run(args):
     from uav_tilt_tools.report_plots import write_plots   # matplotlib only when plotting
     notes = []
     try:
-        error = not_mcap(args.run_dir)
-        rec = None if error else recording.load_recording(args.run_dir, notes=notes)
-    except FileNotFoundError as err:
-        error = str(err)
-    if error:
-        print(f'uav-tilt report: {error}', file=sys.stderr)
+        rec = recording.load_recording(args.run_dir, notes=notes)
+    except (FileNotFoundError, recording.NotMcap) as err:
+        print(f'uav-tilt report: {err}', file=sys.stderr)
         return 2
     for note in notes:
         print(f'uav-tilt report: {note}')
@@ -60,17 +54,6 @@ def run(args):
     write_plots(rec, args.run_dir, tool_tip_x_m)
     print(json.dumps(summary))
     return 0
-
-
-def not_mcap(run_dir):
-    """Why a RUN_DIR/*.mcap is not an MCAP file, or ''. Only the magic at its start is
-    checked: a killed recorder's file has it and no end, and :mod:`recording` reads any file
-    it cannot finish as torn, so it would report one that is no MCAP as empty and torn."""
-    for path in sorted(glob.glob(os.path.join(run_dir, '*.mcap'))):
-        with open(path, 'rb') as stream:
-            if stream.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
-                return f'{path} is not an MCAP file (it does not start with the MCAP magic)'
-    return ''
 
 
 def real_time_factor(plant_statuses):
