@@ -12,7 +12,8 @@
 # (5, whole) seconds are killed. Should this script be killed outright (SIGKILL), its
 # nodes get SIGTERM from the kernel (UAV_TILT_PARENT_PID, uav_tilt_common/parent_watch.py)
 # and end themselves after the same grace should their shutdown hang.
-# Exit 0 only when every node stopped cleanly and, with --mission, the mission succeeded.
+# Exit 0 only when every node stopped cleanly and, with --mission, the mission succeeded;
+# 2 when an option, the scenario or a node's parameters were refused.
 # --vision-only starts vision alone: the companion computer's side of a two-computer run,
 # whose other side is --no-vision. --param sets one parameter of one node (plant,
 # controller, vision, recorder, foxglove), e.g. --param controller.contact_force:=4.0.
@@ -40,6 +41,15 @@ export UAV_TILT_GRACE_S=$GRACE_S
 scenario='' realtime=0 record='' mission='' plan='' foxglove=0 vision=1 target_source=''
 vision_only=0
 PARAMS=()
+# Parameters the script sets from its own options: a --param for one would split what the
+# nodes are told (the plant's scenario against the plan's site, say), so it is refused.
+declare -A OWNED_BY=(
+    [plant.scenario_file]=--scenario [foxglove.scenario_file]=--scenario
+    [plant.mode]=--realtime [controller.autostart]=--mission [controller.plan_file]=--plan
+    [controller.target_source]=--target-source [recorder.output]=--record
+    [plant.hold_until_recorded]=--record [controller.hold_until_recorded]=--record
+    [plant.summary_file]='the script (its timing line at the end)'
+)
 while (($#)); do
     case $1 in
         --scenario) scenario=${2:-}; [[ -n $scenario ]] || die '--scenario needs a file'; shift 2 ;;
@@ -61,6 +71,8 @@ while (($#)); do
         --param)
             [[ ${2:-} =~ ^(plant|controller|vision|recorder|foxglove)\.[A-Za-z0-9_.]+:=.+ ]] \
                 || die "--param: NODE.NAME:=VALUE with NODE one of plant, controller, vision, recorder, foxglove"
+            owner=${OWNED_BY[${2%%:=*}]:-}
+            [[ -z $owner ]] || die "--param ${2%%:=*}: set by $owner"
             PARAMS+=("$2")
             shift 2 ;;
         -h | --help) usage; exit 0 ;;
@@ -98,6 +110,12 @@ else
     PY=$(command -v python3) || die 'no .venv and no python3 on PATH'
 fi
 
+# The scenario is read here as well as by the plant, so that a missing or bad file is one
+# line and exit 2 before anything starts; its site (wall, target ids) is what --plan needs.
+if ((!vision_only)); then
+    site=$("$PY" -m uav_tilt_tools.site_params "$scenario") || { usage >&2; exit 2; }
+fi
+
 # CMD := the command of executable $1 (python module $2).
 resolve() {
     if [[ -n $BIN && -x $BIN/$1 ]]; then
@@ -109,18 +127,14 @@ resolve() {
     fi
 }
 
-# CMD += the ROS arguments of node $1: its parameter file (if any), use_sim_time (not for
+# CMD += the ROS arguments of node $1: its parameter file (if any) and use_sim_time (not for
 # the plant, which owns time, nor for the mission watcher, which only reads status: sim
-# time would cost it a /clock message every control tick) and the --param values given
-# for it (last, so that they win).
+# time would cost it a /clock message every control tick). `start` adds the --param values
+# last, so that they win over these and over what the script sets itself.
 ros_args() {
-    local p
     CMD+=(--ros-args -r __ns:=/uav)
     [[ ! -f $CONFIG/$1.yaml ]] || CMD+=(--params-file "$CONFIG/$1.yaml")
     [[ $1 == plant || $1 == mission_watch ]] || CMD+=(-p use_sim_time:=true)
-    for p in ${PARAMS[@]+"${PARAMS[@]}"}; do
-        [[ $p != "$1".* ]] || CMD+=(-p "${p#"$1".}")
-    done
 }
 
 # --realtime: the plant and the controller (the 300 Hz loop) and vision run with real-time
@@ -158,8 +172,11 @@ kill_all() {
 trap kill_all EXIT
 
 start() {
-    local name=$1
+    local name=$1 p
     ((!stop_signal)) || return 0
+    for p in ${PARAMS[@]+"${PARAMS[@]}"}; do
+        [[ $p != "$name".* ]] || CMD+=(-p "${p#"$name".}")
+    done
     # Job control gives each node its own process group, so a terminal's Ctrl-C reaches
     # the nodes once (from here), and their SIGINT is not ignored as in background jobs.
     set -m
@@ -212,7 +229,6 @@ if ((!vision_only)); then
     [[ -z $mission ]] || CMD+=(-p "autostart:=$mission")
     if [[ -n $plan ]]; then
         # the site the plan is checked against: the scenario's wall and target ids
-        site=$("$PY" -m uav_tilt_tools.site_params "$scenario") || die 'bad scenario for the site'
         mapfile -t SITE <<<"$site"
         CMD+=(-p "plan_file:=$(realpath "$plan")" "${SITE[@]}")
     fi
@@ -282,14 +298,18 @@ for pid in "${!RUNNING[@]}"; do
     unset "RUNNING[$pid]"
 done
 
+refused=0
 for pid in "${!NAME_OF[@]}"; do
     code=${CODE_OF[$pid]}
     log "${NAME_OF[$pid]}: exit code $code"
     [[ $code == 0 ]] || failed=1
+    # a node exits 2 when it refuses its parameters or files (DESIGN §6): so does the script
+    [[ $code != 2 || ${NAME_OF[$pid]} == mission_watch ]] || refused=1
 done
 if [[ -s $PLANT_SUMMARY ]]; then log "plant timing: $(<"$PLANT_SUMMARY")"; fi
 if [[ -n $mission && $mission_code != 0 ]]; then
     log 'mission did not succeed'
     failed=1
 fi
+((!refused)) || exit 2
 exit "$failed"

@@ -7,6 +7,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from uav_tilt_common.modes import NOT_FLYING
+from uav_tilt_control.controller_core import ControllerConfig
 from uav_tilt_tools import gym_env
 from uav_tilt_tools.inprocess import mission_result
 
@@ -31,6 +32,22 @@ def test_check_env_passes_with_the_camera():
         env.close()
 
 
+def test_vision_in_the_loop_runs_the_deployed_detector_from_any_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)         # the package's model, not one beside the user
+    env = gym.make(gym_env.ENV_ID, start='takeoff', target_source='vision',
+                   disable_env_checker=True)
+    try:
+        env.reset(seed=int(np.random.default_rng().integers(0, 2**31 - 1)))
+        for _ in range(10):
+            env.step(np.zeros(3, dtype=np.float32))
+        vision = env.unwrapped.flight.vision
+        # 10 steps of 10 ticks at 300 Hz: the 30 Hz camera's frames of a third of a second
+        assert vision.frames >= 10 and vision.pipeline.detector.model_path.endswith(
+            'detector_int8.onnx')
+    finally:
+        env.close()
+
+
 def test_bad_options_stop_with_one_clear_error():
     with pytest.raises(Exception, match='start'):
         gym_env.ContactInspectionEnv(start='orbit')
@@ -39,6 +56,12 @@ def test_bad_options_stop_with_one_clear_error():
         gym_env.ContactInspectionEnv(action_rate_hz=7.0)
     with pytest.raises(gym.error.ResetNeeded):
         gym_env.ContactInspectionEnv().step(np.zeros(3, dtype=np.float32))
+    # the controller's parameters as a config, as well as a dict, and checked alike
+    force_n = float(np.random.default_rng().uniform(2.0, 8.0))
+    env = gym_env.ContactInspectionEnv(controller=ControllerConfig(contact_force=force_n))
+    assert env.cfg.controller.contact_force == force_n
+    with pytest.raises(ValueError, match='contact_force'):
+        gym_env.ContactInspectionEnv(controller=ControllerConfig(contact_force=-force_n))
 
 
 def test_a_takeoff_episode_counts_its_time_from_the_wall_and_refuses_bad_input():

@@ -227,12 +227,38 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
     (['--mission', 'survey'], "--mission: 'inspect' or 'plan'"),
     (['--param', 'controller.contact_force:='], '--param: NODE.NAME:=VALUE'),
     (['--no-vision', '--record', '/proc/run'], '--record: cannot write'),
+    # what an option sets is not a --param's to split
+    (['--param', 'plant.mode:=realtime'], '--param plant.mode: set by --realtime'),
+    (['--param', 'controller.autostart:=inspect'], 'set by --mission'),
+    (['--param', 'recorder.output:=/tmp/x'], 'set by --record'),
+    # the scenario is read before anything starts, as the plant reads it
+    (['--no-vision', '--scenario', 'no_such_world.yaml'], 'no such file'),
+    (['--no-vision', '--scenario', 'world.yaml'], "'wall' = 0 must be a mapping"),
 ])
 def test_bad_arguments_start_nothing(tmp_path, args, words):
+    (tmp_path / 'world.yaml').write_text('wall: 0\n')
     result = subprocess.run([LAUNCH, *args], cwd=tmp_path, capture_output=True, text=True,
                             timeout=30)
     assert result.returncode == 2 and words in result.stderr, result.stderr
     assert 'Traceback' not in result.stderr and 'FATAL' not in result.stderr
+    assert '[launch] plant (pid' not in result.stderr, result.stderr
+
+
+def test_a_node_refusing_its_parameters_is_exit_2_and_a_param_wins(tmp_path):
+    plan = os.path.join(REPO, 'config', 'plans', 'inspection.yaml')
+    result = subprocess.run(
+        [LAUNCH, '--no-vision', '--mission', 'plan', '--plan', plan,
+         '--param', 'controller.site.wall_yaw_deg:=7.5',
+         '--param', 'controller.contact_force:=-1.0'],
+        cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stderr
+    assert 'contact_force' in result.stderr and 'Traceback' not in result.stderr
+    # The site the script takes from the scenario comes first, the --param last: rcl keeps
+    # the last value given for a name.
+    command = next(line for line in result.stderr.splitlines()
+                   if line.startswith('[launch] controller (pid'))
+    words = command.split()
+    assert words.index('site.wall_yaw_deg:=7.5') > words.index('site.wall_yaw_deg:=0.0')
 
 
 @pytest.mark.parametrize('modes, success, result', [

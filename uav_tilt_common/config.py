@@ -107,8 +107,11 @@ def check_field(name: str, value: Any, default: Any, meta: Mapping[str, Any]) ->
 
 
 def from_dict(cls: type[ConfigT], data: Mapping[str, Any] | None, prefix: str = '') -> ConfigT:
-    """Build and validate config ``cls`` from nested dicts and/or dotted keys."""
+    """Build and validate config ``cls`` from nested dicts and/or dotted keys; a group may
+    also be given as an instance of its config class (checked like the others)."""
     # None is a group left empty (YAML `wall:`); 0, [] or '' are not groups
+    if isinstance(data, cls):
+        data = to_flat(data)
     data = _unflatten({} if data is None else data)
     if not isinstance(data, dict):
         raise ConfigError(f"parameter '{prefix.rstrip('.') or cls.__name__}' = {data!r} "

@@ -30,7 +30,7 @@ __all__ = ['DURATION_S', 'check_plan', 'fly', 'jsonable', 'register',
            'site_overrides']
 
 
-def fly(scenario, target_source='vision', overrides=None, duration_s=None, model_path=None,
+def fly(scenario, target_source='vision', overrides=None, duration_s=None, model_path='',
         threads=0, record=None):
     """Fly the inspection mission of ``scenario`` (the plan in ``overrides['plan_file']``
     when given) for at most ``duration_s`` (default DURATION_S per task); returns the
@@ -47,10 +47,7 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
         duration_s = DURATION_S * len(plan_of(config))
     plant_config, vision = PlantCoreConfig(), None
     if target_source == 'vision':
-        from uav_tilt_common.resources import locate
-        from uav_tilt_vision.vision_node import VisionNodeConfig
-        vision = camera_vision(plant_config, model_path or locate(VisionNodeConfig().model_path),
-                               threads=threads)
+        vision = camera_vision(plant_config, model_path, threads=threads)
     bag = None
     if record is not None:
         from uav_tilt_tools.flight_bag import FlightBag

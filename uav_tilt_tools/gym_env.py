@@ -236,9 +236,7 @@ class ContactInspectionEnv(gym.Env):
                                                   **site_overrides(scenario, hint)})
         vision = None
         if self.cfg.target_source == 'vision':
-            from uav_tilt_vision.vision_node import REPO, VisionNodeConfig
-            vision = camera_vision(self.plant_config,
-                                   self.cfg.model_path or REPO / VisionNodeConfig().model_path,
+            vision = camera_vision(self.plant_config, self.cfg.model_path,
                                    threads=self.cfg.detector_threads)
         self.flight = flight = Flight(scenario, config, plant_config=self.plant_config,
                                       vision=vision)

@@ -215,11 +215,13 @@ class CameraVision:
         return t_s, result.candidates, result.planes
 
 
-def camera_vision(plant_config, model_path, backend='auto', vision_config=None, threads=0):
-    """A :class:`CameraVision` with the detector at ``model_path`` and the plant's camera;
-    ``threads`` (0: the libraries' defaults) sizes the detector's thread pool and
-    OpenCV's (process-wide), e.g. to the one CPU a campaign run gets."""
-    from uav_tilt_vision.backends import load_detector
+def camera_vision(plant_config, model_path='', backend='auto', vision_config=None, threads=0):
+    """A :class:`CameraVision` with the detector at ``model_path`` (found like the vision
+    node's: the working directory, then the package's files; '' the deployed detector) and
+    the plant's camera; ``threads`` (0: the libraries' defaults) sizes the detector's thread
+    pool and OpenCV's (process-wide), e.g. to the one CPU a campaign run gets."""
+    from uav_tilt_common.resources import locate
+    from uav_tilt_vision.backends import DEPLOYED_MODEL, load_detector
     from uav_tilt_vision.pipeline import VisionPipeline
     from uav_tilt_vision.target_pose import CameraIntrinsics
     if threads:
@@ -227,6 +229,6 @@ def camera_vision(plant_config, model_path, backend='auto', vision_config=None, 
         cv2.setNumThreads(threads)
     cam = plant_config.camera
     intrinsics = CameraIntrinsics(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
-    pipeline = VisionPipeline(load_detector(model_path, backend, threads), intrinsics,
-                              vision_config)
+    detector = load_detector(locate(model_path or DEPLOYED_MODEL), backend, threads)
+    pipeline = VisionPipeline(detector, intrinsics, vision_config)
     return CameraVision(pipeline, cam.rate_hz, plant_config.control_hz)

@@ -16,6 +16,9 @@ import numpy as np
 
 from uav_tilt_vision.detector import detections, input_batch, load_model
 
+# The deployed detector, relative to the package's files (uav_tilt_common.resources).
+DEPLOYED_MODEL = 'models/detector_int8.onnx'
+
 BACKENDS = ('torch', 'onnxruntime')
 
 

@@ -27,7 +27,8 @@ from uav_tilt_common.config import param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.targets import no_target_covariance
-from uav_tilt_vision.backends import BACKENDS, OnnxDetector, TorchDetector, load_detector
+from uav_tilt_vision.backends import BACKENDS, DEPLOYED_MODEL, OnnxDetector, TorchDetector, \
+    load_detector
 from uav_tilt_vision.pipeline import STAGES, STATS_WINDOW, FrameResult, VisionConfig, \
     VisionPipeline, check_frame, draw_debug
 from uav_tilt_vision.target_pose import CameraIntrinsics
@@ -42,7 +43,7 @@ class VisionNodeConfig(VisionConfig):
     `detect_every` are stable); a relative model path is looked up in the working
     directory, then in the package's files (:mod:`uav_tilt_common.resources`)."""
 
-    model_path: str = param('models/detector_int8.onnx',
+    model_path: str = param(DEPLOYED_MODEL,
                             doc='detector file; relative: working directory, else package')
     backend: str = param('onnxruntime', choices=BACKENDS + ('auto',),
                          doc='inference backend (auto: by file suffix)')
