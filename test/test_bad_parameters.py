@@ -1,6 +1,6 @@
 """Each way a start parameter can be wrong stops the node with one line naming it, exit code
 2 and no traceback: a value of the wrong type (rclpy's own exception otherwise), out of
-range, not a choice, or a file that is not there."""
+range, not a choice, a file that is not there, or a name the node does not have."""
 import subprocess
 import sys
 
@@ -23,6 +23,12 @@ import pytest
     ('uav_tilt_tools.recorder_node', 'output:=/proc/run.mcap', ["'output'", '/proc/run.mcap']),
     ('uav_tilt_control.controller_node', 'contact_force:=0.5',
      ["'contact_force'", '0.5', '(1.0, 15.0)']),
+    # a misspelt name would leave its parameter at the default without a word
+    ('uav_tilt_vision.vision_node', 'detect_evry:=3',
+     ["unknown parameter 'detect_evry'", "'detect_every'"]),
+    ('uav_tilt_control.controller_node', 'mission.hold_time:=3.0',
+     ["unknown parameter 'mission.hold_time'", "'mission.hold_time_s'"]),
+    ('uav_tilt_tools.foxglove_bridge', 'prot:=8765', ["unknown parameter 'prot'"]),
 ])
 def test_a_bad_parameter_is_one_line_and_exit_code_2(tmp_path, module, value, words):
     result = subprocess.run([sys.executable, '-m', module, '--ros-args', '-r', '__ns:=/uav',

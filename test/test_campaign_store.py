@@ -74,6 +74,28 @@ def test_resume_refuses_another_campaign(tmp_path):
         cp.campaign(1, SEED + 1, duration_s=0.1, progress=False, out=tmp_path, resume=True)
 
 
+def test_a_damaged_store_is_refused_and_keeps_its_runs(tmp_path):
+    out = tmp_path / 'store'
+    cp.campaign(3, SEED, duration_s=0.1, progress=False, out=out)
+    runs_path = out / RUNS_FILE
+    lines = runs_path.read_text().splitlines(keepends=True)
+    # an edit in the middle (not a kill's torn last line): refused, the runs after it kept
+    runs_path.write_text(lines[0] + '{"index": 1, "se\n' + lines[2])
+    damaged = runs_path.read_bytes()
+    with pytest.raises(ConfigError, match='line 2 is no run'):
+        cp.campaign(3, SEED, duration_s=0.1, progress=False, out=out, resume=True)
+    assert runs_path.read_bytes() == damaged
+    # arguments that are no JSON, an --out that is a file, a resume with no folder
+    (out / 'campaign_args.json').write_text('{"n": 3, "seed":')
+    with pytest.raises(ConfigError, match='unreadable'):
+        cp.campaign(3, SEED, duration_s=0.1, progress=False, out=out, resume=True)
+    (tmp_path / 'file').write_text('')
+    with pytest.raises(ConfigError, match='cannot make the folder'):
+        cp.campaign(1, SEED, duration_s=0.1, progress=False, out=tmp_path / 'file')
+    with pytest.raises(ConfigError, match='--out'):
+        cp.campaign(1, SEED, duration_s=0.1, progress=False, resume=True)
+
+
 def test_corners_reach_every_run_and_a_resume_keeps_them(tmp_path):
     done = subprocess.run(_cli('--corners', '--n', '2', '--duration', '0.1', '--out',
                                str(tmp_path)), capture_output=True, text=True, timeout=120)

@@ -67,6 +67,8 @@ def test_a_bad_plan_file_is_one_line(tmp_path, capsys, plan, words):
     (['--set', 'contact_force=18'], ["'contact_force' = 18.0", '(1.0, 15.0)']),
     (['--set', 'contact_force=[1'], ['--set', 'contact_force=[1']),
     (['--set', 'target_source=vision'], ['--target-source']),
+    # the plan is --plan's: a second one in --set was left unflown without a word
+    (['--plan', 'config/plans/inspection.yaml', '--set', 'plan_file=other.yaml'], ['--plan']),
     # a hint is good to 0.3 m: one farther off the 5 m x 3.5 m wall is a mistake
     (['--hint', '100', '100'], ["'site.target_hint_uv_m'", 'off the wall']),
     (['--hint', '2.85', '1.0'], ["'site.target_hint_uv_m'", 'off the wall']),
@@ -92,6 +94,9 @@ def test_a_bad_controller_setting_is_one_line(capsys, args, words):
     (['campaign', '--duration', 'inf'], ['--duration']),
     (['bench', 'sim', '--seconds', 'nan'], ['--seconds']),
     (['bench', 'control', '--seconds', '0'], ['--seconds']),
+    # an empty plan would fly the one-touch inspection instead
+    (['fly', '--scenario', 'config/scenarios/plan.yaml', '--plan', ''], ['--plan']),
+    (['campaign', '--scenario', 'config/scenarios/plan.yaml', '--plan', ' '], ['--plan']),
 ])
 def test_a_bad_option_value_is_refused_by_the_parser(capsys, argv, words):
     code, out, err = refusal(capsys, argv)

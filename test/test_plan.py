@@ -15,8 +15,9 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore, plan_of
 from uav_tilt_control.mission import MissionConfig
 from uav_tilt_control.plan import Slide, Touch, load_plan, parse_plan
-from uav_tilt_control.site import SiteConfig
+from uav_tilt_control.site import HINT_ERROR_M, SiteConfig
 from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_tools.fly import DURATION_S, default_duration_s
 from uav_tilt_tools.site_params import ros_arguments, site_overrides
 
 REPO = pathlib.Path(__file__).resolve().parent.parent
@@ -78,6 +79,41 @@ def test_a_bad_plan_is_refused_with_one_line(tasks, words):
     assert '\n' not in message
     for word in words:
         assert word in message, message
+
+
+def test_a_plan_below_the_lowest_the_mission_works_at_is_refused(tmp_path):
+    """A slide along the foot of the wall ended in flight with the failsafe 'unreachable';
+    a touch's plate may lie the hint's error above its hint."""
+    mission = MissionConfig()
+    lowest_m = mission.lowest_hover_m()       # the wall of plan.yaml stands on z = 0
+    margin_m = float(np.random.default_rng().uniform(0.01, 0.1))
+    refused = [_slide(from_uv_m=[1.3, lowest_m - margin_m], to_uv_m=[1.3, 2.0]),
+               _touch(near_uv_m=[-0.4, lowest_m - HINT_ERROR_M - margin_m])]
+    for task in refused:
+        with pytest.raises(ConfigError, match='below the lowest the mission works at'):
+            parse_plan({'tasks': [task]}, _site(), FORCES, lowest_m)
+    kept = [_slide(from_uv_m=[1.3, lowest_m + margin_m], to_uv_m=[1.3, 2.0]),
+            _touch(near_uv_m=[-0.4, lowest_m - HINT_ERROR_M + margin_m])]
+    assert len(parse_plan({'tasks': kept}, _site(), FORCES, lowest_m)) == 2
+    # the controller checks its plan file so, with its own mission's ground
+    with pytest.raises(ConfigError, match='below the lowest'):
+        plan_of(_config(tmp_path, refused[:1]))
+    assert plan_of(_config(tmp_path, refused[:1], **{'mission.ground_z_m': -1.0}))
+
+
+def test_the_default_time_limit_covers_what_the_plan_pushes():
+    # a long hold and a long, slow slide: each task keeps the flight and search time a
+    # default task has, on top of its own pushing
+    rng = np.random.default_rng()
+    hold_s, speed_m_s = rng.uniform(200.0, 600.0), rng.uniform(0.005, 0.01)
+    tasks = parse_plan({'tasks': [_touch(hold_s=hold_s),
+                                  _slide(from_uv_m=[1.3, 0.7], to_uv_m=[1.3, 2.5],
+                                         speed_m_s=speed_m_s)]}, _site(), FORCES)
+    flight_s = DURATION_S - MissionConfig().hold_time_s
+    assert default_duration_s(tasks) >= hold_s + 1.8 / speed_m_s + 2 * flight_s - 1e-9
+    # the plan of the defaults keeps the per-task limit
+    assert default_duration_s(load_plan(PLAN, _site(), FORCES)) == pytest.approx(
+        3 * DURATION_S + 1.0 / 0.1 - MissionConfig().hold_time_s)
 
 
 def test_a_slide_needs_the_surveyed_wall():

@@ -6,9 +6,12 @@ interest along the surface, the push within 0.1 N mean and 0.2 N RMS of the task
 the slide keeps the push within 0.3 N RMS and the tool tip within 1 cm RMS of the line;
 contact is never lost. Seeds (textures, noise) are drawn fresh and printed on failure."""
 import dataclasses
+import json
 import multiprocessing
 import os
 import pathlib
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -34,16 +37,23 @@ def _world(inclination_deg, seed):
 
 
 def _fly(job):
-    inclination_deg, seed = job
+    inclination_deg, seed, record = job
     scenario = _world(inclination_deg, seed)
     return inclination_deg, fly(scenario, 'vision', check_plan(scenario, str(PLAN)),
-                                model_path=MODEL)
+                                model_path=MODEL, record=record)
 
 
 @pytest.fixture(scope='module')
-def flights():
+def bag_dir(tmp_path_factory):
+    """Where the vertical wall's flight is recorded, as `campaign --record` records it."""
+    return tmp_path_factory.mktemp('plan_flight')
+
+
+@pytest.fixture(scope='module')
+def flights(bag_dir):
     """inclination -> summary of the plan's flight, the two flown side by side."""
-    jobs = list(zip(INCLINATIONS_DEG, SEEDS))
+    records = [str(bag_dir / 'recording.mcap'), None]
+    jobs = list(zip(INCLINATIONS_DEG, SEEDS, records))
     with multiprocessing.get_context('spawn').Pool(min(2, os.cpu_count() or 1)) as pool:
         return dict(pool.imap_unordered(_fly, jobs))
 
@@ -69,3 +79,25 @@ def test_two_touches_and_a_slide_with_vision_in_the_loop(flights, inclination_de
     # the whole line, at 0.1 m/s plus the speed-up and slow-down
     assert slide['length_m'] == pytest.approx(1.0, abs=0.01), details
     assert 10.0 <= slide['duration_s'] <= 13.0, details
+
+
+def test_the_recorded_plan_flight_reports_what_the_flight_did(flights, bag_dir):
+    """`uav-tilt report` of the in-process recording: the same tasks, verdict and metrics
+    as the flight's own summary (both measure the F/T push and the true tool tip), and the
+    run's timing."""
+    flown = flights[INCLINATIONS_DEG[0]]
+    done = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.cli', 'report', str(bag_dir)],
+                          cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    reported = json.loads(done.stdout)
+    assert reported['success'] == flown['success'] and reported['failure'] == flown['failure']
+    assert [(t['kind'], t.get('target'), t['success']) for t in reported['tasks']] == \
+        [(t['kind'], t.get('target'), t['success']) for t in flown['tasks']]
+    for mine, theirs in zip(reported['tasks'], flown['tasks']):
+        for key in ('force_mean_n', 'force_rms_error_n'):
+            assert mine[key] == pytest.approx(theirs[key], abs=0.02), (key, mine, theirs)
+    # touches' POI error and the first touch's keys at the top, as in the flight's summary
+    assert reported['poi_error_max_m'] == pytest.approx(flown['poi_error_max_m'], abs=1e-3)
+    # sim over wall time, ticks over wall time: of the flight, not of the file's closing
+    assert reported['rtf'] == pytest.approx(flown['rtf'], rel=0.2)
+    assert reported['controller_rate_hz'] == pytest.approx(flown['controller_rate_hz'], rel=0.2)

@@ -8,6 +8,7 @@ import shutil
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from mcap.writer import MCAP0_MAGIC
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo
@@ -259,9 +260,10 @@ def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, cap
         dst.write(data[:flushed + 100])     # the second chunk torn, no footer
     bag.close()
     assert report.run(argparse.Namespace(run_dir=str(run))) == 0
-    out = capsys.readouterr().out
-    assert 'incomplete (no footer' in out and f'read {cut} messages' in out
+    out, err = capsys.readouterr()
+    assert 'incomplete (no footer' in err and f'read {cut} messages' in err
     summary = json.loads((run / 'summary.json').read_text())
+    assert json.loads(out) == summary           # stdout: the JSON alone, as fly prints it
     kept = {topic: [(log_ns, m) for log_ns, m in msgs if log_ns <= wall_ns(1.8)]
             for topic, msgs in rec.items()}
     assert summary == report.summarize(kept, TOOL_X)
@@ -269,19 +271,37 @@ def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, cap
     # The finished file reads completely.
     shutil.copy(live / 'recording.mcap', run / 'recording.mcap')
     assert report.run(argparse.Namespace(run_dir=str(run))) == 0
-    assert 'incomplete' not in capsys.readouterr().out
+    assert 'incomplete' not in capsys.readouterr().err
+    assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
+    # a file torn within its first record (shorter than MCAP's footer) is an empty run
+    for size in (len(MCAP0_MAGIC), 20):
+        (run / 'recording.mcap').write_bytes(data[:size])
+        assert report.run(argparse.Namespace(run_dir=str(run))) == 0
+        out, err = capsys.readouterr()
+        assert 'read 0 messages' in err and json.loads(out)['success'] is None   # no data
+    # the file itself, as well as its folder; the summary goes beside it
+    shutil.copy(live / 'recording.mcap', run / 'recording.mcap')
+    (run / 'summary.json').unlink()
+    assert report.run(argparse.Namespace(run_dir=str(run / 'recording.mcap'))) == 0
     assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
 
 
 @pytest.mark.parametrize('content, why', [(None, 'no *.mcap in'),
                                           (b'garbage', 'is not an MCAP file'),
-                                          (b'', 'is not an MCAP file')])
+                                          (b'', 'is not an MCAP file'),
+                                          ('two', '2 MCAP files in'),
+                                          ('missing', 'no such folder or file')])
 def test_a_folder_without_an_mcap_recording_is_refused_with_one_line(tmp_path, capsys,
                                                                      content, why):
-    """Bad input: exit 2, one line on stderr, no summary (unlike a file torn at its end)."""
-    if content is not None:
+    """Bad input: exit 2, one line on stderr, no summary (unlike a file torn at its end);
+    two runs in one folder are not merged into one."""
+    run_dir = tmp_path / 'no_such_run' if content == 'missing' else tmp_path
+    if content == 'two':
+        for name in ('a.mcap', 'b.mcap'):
+            (tmp_path / name).write_bytes(MCAP0_MAGIC)
+    elif content not in (None, 'missing'):
         (tmp_path / 'recording.mcap').write_bytes(content)
-    assert report.run(argparse.Namespace(run_dir=str(tmp_path))) == 2
+    assert report.run(argparse.Namespace(run_dir=str(run_dir))) == 2
     out, err = capsys.readouterr()
     assert err.startswith('uav-tilt report: ') and why in err and err.count('\n') == 1
     assert out == '' and not (tmp_path / 'summary.json').exists()

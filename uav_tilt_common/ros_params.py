@@ -1,5 +1,6 @@
 """Config dataclasses as ROS 2 parameters, and the standard node main()."""
 import array
+import difflib
 import math
 import signal
 import sys
@@ -132,6 +133,21 @@ def _plain(value):
     return list(value) if isinstance(value, (array.array, tuple)) else value
 
 
+def check_overrides(node: Node) -> None:
+    """ConfigError, one line, when a parameter given to the node (``-p``, a parameters file)
+    is none it declares: rclpy would keep it unused, and a misspelt name would leave its
+    parameter at the default without a word."""
+    # rclpy has no public view of the overrides of parameters never declared
+    given = getattr(node, '_parameter_overrides', {})
+    unknown = sorted(name for name in given if not node.has_parameter(name))
+    if unknown:
+        close = difflib.get_close_matches(unknown[0], list(node._parameters), n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ''
+        more = f', and {len(unknown) - 1} more' if len(unknown) > 1 else ''
+        raise ConfigError(f"unknown parameter '{unknown[0]}'{hint} of node "
+                          f"'{node.get_name()}'{more}")
+
+
 def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Create the node, serve it (:func:`uav_tilt_common.ros_spin.spin_events`) until a
     stop signal, and shut down cleanly (the ros2/demos pattern).
@@ -139,7 +155,7 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) ->
     SIGINT and SIGTERM are this function's, not rclpy's: rclpy's handlers shut the context
     down at once, under whatever callback runs, whose next publish then raises and is
     logged by the executor as FATAL with its stack; here the spin ends between callbacks.
-    A bad parameter ends the process with exit code 2 and one log line. Started by
+    A bad or unknown parameter ends the process with exit code 2 and one log line. Started by
     scripts/launch.sh, the node also ends when the script does (:mod:`parent_watch`).
     """
     parent_watch.die_with_parent()
@@ -149,6 +165,7 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) ->
     code = 0
     try:
         node = node_factory()
+        check_overrides(node)
         spin_events(node, stop)
     except ConfigError as err:
         print(f'[FATAL] {err}', file=sys.stderr, flush=True)

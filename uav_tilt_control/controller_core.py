@@ -63,7 +63,8 @@ def plan_of(cfg):
     if not cfg.plan_file:
         check_force("parameter 'contact_force'", cfg.contact_force, force_range_n)
         return one_touch_plan(cfg.site.check(), cfg.contact_force, m.hold_time_s)
-    return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, force_range_n)
+    return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, force_range_n,
+                     m.lowest_hover_m())
 
 
 class ControllerCore:

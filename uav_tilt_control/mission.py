@@ -186,6 +186,11 @@ class MissionConfig:
     slide_accel_m_s2: float = param(0.1, lo=0.005, hi=2.0)
     slide_path_tolerance_m: float = param(0.05, lo=0.001, hi=1.0)
 
+    def lowest_hover_m(self):
+        """The lowest altitude the mission hovers, searches or works at: twice the landing
+        detector's height above the ground, clear of it."""
+        return self.ground_z_m + 2.0 * self.land_detect_height_m
+
 
 @dataclasses.dataclass
 class TaskRecord:
@@ -483,7 +488,7 @@ class Mission:
         if self._mode != Mode.HOVER or self._flight_phase:
             return False, f'setpoints are accepted in HOVER only, not {self._mode.value}' + (
                 f' ({self._flight_phase})' if self._flight_phase else '')
-        lowest_m = self._lowest_hover_m()
+        lowest_m = self.config.lowest_hover_m()
         if p[2] < lowest_m:
             self.rejected_setpoints += 1
             return False, (f'setpoint z {p[2]:g} m is below the lowest hover, {lowest_m:g} m '
@@ -491,11 +496,6 @@ class Mission:
         self._plan(p, self.config.hover_speed_m_s)
         self._yaw_goal = float(yaw_rad)
         return True, 'setpoint accepted'
-
-    def _lowest_hover_m(self):
-        """The lowest altitude the mission hovers or searches at: twice the landing
-        detector's height above the ground, clear of it."""
-        return self.config.ground_z_m + 2.0 * self.config.land_detect_height_m
 
     # ---- the tick ----
 
@@ -584,7 +584,7 @@ class Mission:
         elif task.hint_map is not None and task.normal_map is not None:
             # look at where the plan says the target is, facing the wall, then search
             look = task.hint_map + task.normal_map * cfg.look_distance_m
-            look[2] = max(look[2], self._lowest_hover_m())
+            look[2] = max(look[2], self.config.lowest_hover_m())
             if self._mode != Mode.HOVER:
                 self._enter(Mode.HOVER, f'task {index}: to its target')
             self._flight_phase = 'transit'
@@ -798,7 +798,7 @@ class Mission:
     def _search_altitudes_m(self):
         """The altitudes SEARCH turns at, in turn: takeoff, higher, lower."""
         cfg = self.config
-        low = max(cfg.takeoff_altitude_m - cfg.search_descend_m, self._lowest_hover_m())
+        low = max(cfg.takeoff_altitude_m - cfg.search_descend_m, self.config.lowest_hover_m())
         return (cfg.takeoff_altitude_m, cfg.takeoff_altitude_m + cfg.search_climb_m, low)
 
     def _tick_confirm(self, target):

@@ -18,6 +18,7 @@ import dataclasses
 import numpy as np
 
 from uav_tilt_common.config import ConfigError, from_dict, param, read_yaml
+from uav_tilt_control.site import HINT_ERROR_M
 
 UV_RANGE_M = 1000.0
 
@@ -65,6 +66,11 @@ class Touch:
     near_uv_m: list | None = None
     kind = 'touch'
 
+    @property
+    def contact_s(self):
+        """How long the task pushes: its hold."""
+        return self.hold_s
+
     def describe(self):
         """JSON-able description (controller/plan)."""
         return dict(kind=self.kind, target=self.target, force_n=self.force_n,
@@ -89,6 +95,11 @@ class Slide:
     def length_m(self):
         """Length of the polyline."""
         return float(np.sum(np.linalg.norm(np.diff(self.points_map, axis=0), axis=1)))
+
+    @property
+    def contact_s(self):
+        """How long the task pushes: the polyline at its speed."""
+        return self.length_m / self.speed_m_s
 
     def describe(self):
         """JSON-able description (controller/plan)."""
@@ -118,23 +129,25 @@ def one_touch_plan(site, force_n, hold_s):
                   list(site.target_hint_uv_m) or None)]
 
 
-def load_plan(path, site, force_range_n):
+def load_plan(path, site, force_range_n, lowest_m=None):
     """Read, validate and resolve the plan file ``path`` (see the module docstring).
 
     ``site``: the SiteConfig the plan is checked against (target ids, wall extent);
-    ``force_range_n``: (low, high), the open range a task's push must lie in.
+    ``force_range_n``: (low, high), the open range a task's push must lie in; ``lowest_m``:
+    the lowest altitude (map z) the mission works at (MissionConfig.lowest_hover_m), which
+    a slide's line and a touch's target (its position within the hint's error) must reach.
     """
     try:
         data = read_yaml(path)
     except ConfigError as err:
         raise ConfigError(f"plan_file '{path}': cannot be read: {err}") from None
     try:
-        return parse_plan(data, site, force_range_n)
+        return parse_plan(data, site, force_range_n, lowest_m)
     except ConfigError as err:
         raise ConfigError(f"plan_file '{path}': {err}") from None
 
 
-def parse_plan(data, site, force_range_n):
+def parse_plan(data, site, force_range_n, lowest_m=None):
     """Validate and resolve plan ``data`` (as loaded from YAML); see :func:`load_plan`."""
     if not isinstance(data, dict) or set(data) != {'tasks'}:
         keys = sorted(map(str, data)) if isinstance(data, dict) else data
@@ -145,10 +158,11 @@ def parse_plan(data, site, force_range_n):
     if not entries:
         raise ConfigError("'tasks' is empty: a plan needs at least one task")
     site.check()
-    return [_resolve(i, entry, site, force_range_n) for i, entry in enumerate(entries)]
+    return [_resolve(i, entry, site, force_range_n, lowest_m)
+            for i, entry in enumerate(entries)]
 
 
-def _resolve(i, entry, site, force_range_n):
+def _resolve(i, entry, site, force_range_n, lowest_m):
     where = f'tasks[{i}]'
     if not isinstance(entry, dict) or len(entry) != 1 or next(iter(entry)) not in KINDS:
         raise ConfigError(f"{where} = {entry!r} must be one of "
@@ -173,6 +187,17 @@ def _resolve(i, entry, site, force_range_n):
         raise ConfigError(f"{where}: '{name}' = {uv!r} is off the wall (u in "
                           f"[{-site.wall_width_m / 2}, {site.wall_width_m / 2}], v in "
                           f"[0, {site.wall_height_m}] m)")
+    if lowest_m is not None:
+        # a touch's target may lie the hint's error above the point the plan gives
+        slack_m = HINT_ERROR_M if kind == 'touch' else 0.0
+        low = [(name, uv) for name, uv in _points_named(task)
+               if site.point_map(uv)[2] + slack_m < lowest_m]
+        if low:
+            name, uv = low[0]
+            raise ConfigError(f"{where}: '{name}' = {uv!r} is at z = "
+                              f"{site.point_map(uv)[2]:.2f} m, below the lowest the mission "
+                              f"works at, {lowest_m:g} m (mission.ground_z_m + 2 "
+                              f"mission.land_detect_height_m)")
     if kind == 'touch':
         if task.target not in site.target_ids:
             raise ConfigError(f"{where}: 'target' = {task.target!r} is not one of "

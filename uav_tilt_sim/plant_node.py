@@ -324,18 +324,9 @@ class PlantNode(Node):
         self.pub_info.publish(ros_msgs.camera_info_msg(self.cfg.camera, stamp))
 
     def _publish_target(self):
-        world = self.plant.world
-        if world.target_poi_map is None:
-            return
-        poses = {'': (world.target_poi_map, world.R_map_target), **world.targets}
-        for target_id, (poi_map, R_map_target) in poses.items():
-            msg = PoseStamped()
-            msg.header.stamp = ros_msgs.to_stamp(0.0)
-            msg.header.frame_id = names.FRAME_MAP
-            p, q = msg.pose.position, msg.pose.orientation
-            p.x, p.y, p.z = (float(v) for v in poi_map)
-            q.x, q.y, q.z, q.w = (float(v) for v in Rotation.from_matrix(R_map_target).as_quat())
-            self.pub_gt_targets[target_id].publish(msg)
+        for target_id, (poi_map, R_map_target) in self.plant.world.truth_targets().items():
+            self.pub_gt_targets[target_id].publish(ros_msgs.pose_stamped_msg(
+                poi_map, Rotation.from_matrix(R_map_target).as_quat(), ros_msgs.to_stamp(0.0)))
 
     def on_status(self):
         """plant/status: sim and wall time, real-time factor, lockstep counters, rejected

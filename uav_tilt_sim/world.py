@@ -49,6 +49,13 @@ class WorldInfo:
     # id -> (poi_map, R_map_target) of every target
     targets: dict[str, tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
 
+    def truth_targets(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """What each ground-truth target topic carries (names.ground_truth_target): target
+        id ('' the first target) -> (poi_map, R_map_target); empty without a target."""
+        if self.target_poi_map is None or self.R_map_target is None:
+            return {}
+        return {'': (self.target_poi_map, self.R_map_target), **self.targets}
+
     def body_classes(self) -> dict[int, str]:
         """PyBullet body id -> object class (for segmentation labels)."""
         return {o.body: o.cls for o in self.objects}

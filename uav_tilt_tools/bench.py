@@ -4,7 +4,7 @@ object on stdout (DESIGN section 7). ``slide`` is an accuracy bench
 import json
 import os
 
-from uav_tilt_tools import cli_args
+from uav_tilt_common import cli_args
 
 
 def _sim(seconds):

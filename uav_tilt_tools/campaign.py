@@ -30,7 +30,7 @@ from uav_tilt_tools.fly import DURATION_S, jsonable
 from uav_tilt_common.targets import OBJECT_CLASSES
 from uav_tilt_control.site import HINT_ERROR_M
 from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
-from uav_tilt_tools import cli_args
+from uav_tilt_common import cli_args
 from uav_tilt_tools.campaign_ray import CampaignError, ray_runs
 
 BACKENDS = ('local', 'ray')
@@ -195,8 +195,9 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=Non
              progress=True, backend='local', address=None, out=None, resume=False,
              record=False, plan_file=None, scenario_file=None, corners=False):
     """Run ``n`` randomised missions (of the plan ``plan_file`` on ``scenario_file``'s
-    wall when given; ``duration_s`` None: DURATION_S per task; ``corners``: worlds at the
-    ends of every range, :func:`random_draw`); returns the DESIGN section 7 JSON dict.
+    wall when given; ``duration_s`` None: the plan's (:func:`fly.default_duration_s`);
+    ``corners``: worlds at the ends of every range, :func:`random_draw`); returns the
+    DESIGN section 7 JSON dict.
 
     ``backend``: 'local' (a process pool of ``workers``, default one per core) or 'ray'
     (one Ray task per run on a local Ray of ``workers`` CPUs, or on the cluster at
@@ -209,6 +210,8 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=Non
         raise ConfigError(f'backend {backend!r}: expected one of {BACKENDS}')
     if record and out is None:
         raise ConfigError('recording needs an output folder (--out DIR)')
+    if resume and out is None:
+        raise ConfigError('resuming needs the campaign\'s output folder (--out DIR)')
     if address is not None and backend != 'ray':
         raise ConfigError('an address (--address) needs the ray backend (--backend ray)')
     cpus = os.cpu_count() or 1
@@ -316,10 +319,10 @@ def register(sub):
                         help='one MCAP per run: DIR/run_NNNN/recording.mcap')
     parser.add_argument('--duration', type=cli_args.duration_s, default=None,
                         help=f'simulated seconds allowed per mission (default {DURATION_S:.0f}'
-                             f' per task)')
-    parser.add_argument('--plan', default=None, metavar='FILE',
+                             f' per task and the time it pushes beyond the default hold)')
+    parser.add_argument('--plan', type=cli_args.path, default=None, metavar='FILE',
                         help='fly this inspection plan (needs --scenario) in every run')
-    parser.add_argument('--scenario', default=None, metavar='FILE',
+    parser.add_argument('--scenario', type=cli_args.path, default=None, metavar='FILE',
                         help="with --plan: the scenario whose wall and objects it names")
     parser.add_argument('--target-source', choices=('ground_truth', 'vision'),
                         default='ground_truth',

@@ -31,10 +31,17 @@ class RunStore:
         self.out_dir = str(out_dir)
         self.runs_path = os.path.join(self.out_dir, RUNS_FILE)
         args_path = os.path.join(self.out_dir, ARGS_FILE)
-        os.makedirs(self.out_dir, exist_ok=True)
+        try:
+            os.makedirs(self.out_dir, exist_ok=True)
+        except OSError as err:
+            raise ConfigError(f'--out {self.out_dir}: cannot make the folder ({err})') from None
         if resume and os.path.exists(args_path):
-            with open(args_path, encoding='utf-8') as stream:
-                found = json.load(stream)
+            try:
+                with open(args_path, encoding='utf-8') as stream:
+                    found = json.load(stream)
+            except (OSError, ValueError) as err:
+                raise ConfigError(f'{args_path}: unreadable ({err}); not a campaign to '
+                                  f'resume') from None
             if found != args:
                 raise ConfigError(f'{self.out_dir} holds the campaign {found}, not {args}')
         elif os.path.exists(self.runs_path) and os.path.getsize(self.runs_path) and not resume:
@@ -47,20 +54,26 @@ class RunStore:
             open(self.runs_path, 'w').close()
 
     def _read(self):
-        """The runs of runs.jsonl; a line cut short by a kill is dropped from the file."""
+        """The runs of runs.jsonl; the last line, when a kill cut it short, is dropped from
+        the file. Any other line that is no run is refused (ConfigError): the file was
+        edited, and cutting it there would lose the runs after it."""
         if not os.path.exists(self.runs_path):
             return []
-        runs, good_bytes = [], 0
         with open(self.runs_path, 'rb') as stream:
-            for line in stream:
-                try:
-                    runs.append(json.loads(line))
-                except ValueError:
+            lines = stream.read().splitlines(keepends=True)
+        runs, good_bytes = [], 0
+        for number, line in enumerate(lines, 1):
+            try:
+                run = json.loads(line) if line.endswith(b'\n') else None
+            except ValueError:
+                run = None
+            if not isinstance(run, dict):
+                if number == len(lines) and not line.endswith(b'\n'):
                     break
-                if not line.endswith(b'\n'):
-                    runs.pop()
-                    break
-                good_bytes += len(line)
+                raise ConfigError(f'{self.runs_path}: line {number} is no run '
+                                  f'({line[:40]!r}); mend or remove it to resume')
+            runs.append(run)
+            good_bytes += len(line)
         with open(self.runs_path, 'r+b') as stream:
             stream.truncate(good_bytes)
         return runs

@@ -8,6 +8,7 @@ stamps, into an :class:`uav_tilt_tools.mcap_bag.McapBag`; ``uav-tilt report`` re
 a recording of the graph. Log times are the wall clock of the in-process run. Not written:
 the camera images (about 0.3 MB a frame), which no report reads, and the services.
 """
+import json
 import time
 
 import numpy as np
@@ -15,6 +16,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
+from std_msgs.msg import String
 
 from uav_tilt_common import names, ros_msgs
 from uav_tilt_common.modes import WAITING_FOR_SENSORS
@@ -26,7 +28,7 @@ STATUS_HZ = 2.0                 # plant_node's and vision_node's
 TYPES = {topic: names.TOPIC_TYPES[topic] for topic in (
     names.CLOCK, names.IMU, names.ODOM, names.EE_WRENCH, names.ACTUATORS_CMD,
     names.ACTUATORS_STATE, names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
-    names.PLANT_STATUS, names.CONTROLLER_STATUS)}
+    names.PLANT_STATUS, names.CONTROLLER_STATUS, names.CONTROLLER_PLAN)}
 VISION_TYPES = {topic: names.TOPIC_TYPES[topic] for topic in (
     names.CAMERA_INFO, names.TARGET_CANDIDATES, names.TARGET_POSE, names.VISION_PLANES,
     names.VISION_STATUS)}
@@ -53,7 +55,9 @@ class FlightBag:
             self.bag.add_topic(absolute(topic), type_name)
         self._flight = None
         self._saturated_ticks = 0
-        self._window = (time.time_ns(), 0)     # (wall ns, tick) at the last status
+        self._wall_t0_ns = time.time_ns()
+        self._window = (self._wall_t0_ns, 0)     # (wall ns, tick) at the last status
+        self._plan_version = None
         self._frame_stamp = None
         self._vision_window = (time.time_ns(), 0)
 
@@ -66,7 +70,7 @@ class FlightBag:
         plant = flight.plant
         if self._flight is None:
             self._flight = flight
-            self._write_target(flight, now)
+            self._write_targets(flight, now)
         stamp = ros_msgs.to_stamp(sensors.t_s)
         self._write(names.CLOCK, Clock(clock=stamp), now)
         self._write(names.ODOM, ros_msgs.odometry_msg(sensors.odom, stamp), now)
@@ -95,17 +99,19 @@ class FlightBag:
         if self.bag.closed:
             return
         if self._flight is not None:
-            self._write_controller_status(self._flight, time.time_ns())
+            self._write_controller_status(self._flight, time.time_ns(), final=True)
         self.bag.close()
 
     # --- what each node would publish ------------------------------------------------
-    def _write_target(self, flight, now):
-        world = flight.plant.world
-        if world.target_poi_map is None:
-            return
-        q = Rotation.from_matrix(world.R_map_target).as_quat()
-        self._write(names.GROUND_TRUTH_TARGET, ros_msgs.pose_stamped_msg(
-            world.target_poi_map, q, ros_msgs.to_stamp(0.0)), now)
+    def _write_targets(self, flight, now):
+        """Each target's ground truth, as the plant latches it once."""
+        for target_id, (poi_map, R_map_target) in flight.plant.world.truth_targets().items():
+            topic = names.ground_truth_target(target_id)
+            if target_id:
+                self.bag.add_topic(absolute(topic), names.TOPIC_TYPES[names.GROUND_TRUTH_TARGET])
+            self._write(topic, ros_msgs.pose_stamped_msg(
+                poi_map, Rotation.from_matrix(R_map_target).as_quat(), ros_msgs.to_stamp(0.0)),
+                now)
 
     def _write_frame(self):
         """camera_info when the image was ready, target/* when vision was done with it."""
@@ -124,8 +130,16 @@ class FlightBag:
             self._write(names.VISION_PLANES, ros_msgs.planes_msg(result.planes, stamp),
                         processed_ns)
 
-    def _write_controller_status(self, flight, now):
-        """controller/status as controller_node's, its loop rate over the wall clock."""
+    def _write_controller_status(self, flight, now, final=False):
+        """controller/status as controller_node's, its loop rate over the wall clock since
+        the status before (the last status, written after the flight: over the whole
+        flight, the rate `fly` reports); and controller/plan when a task record changed, as
+        controller_node sends them."""
+        mission = flight.core.mission
+        if mission.plan_version != self._plan_version:
+            self._plan_version = mission.plan_version
+            self._write(names.CONTROLLER_PLAN,
+                        String(data=json.dumps(flight.core.plan_report())), now)
         status = flight.status
         wall_ns, tick = self._window
         self._window = (now, flight.plant.tick)
@@ -133,6 +147,8 @@ class FlightBag:
         values.update(ticks=flight.plant.tick, saturated_ticks=self._saturated_ticks,
                       target_source=self.config.target_source, rejected_inputs=0,
                       contact_force=self.config.contact_force)
+        if final:
+            wall_ns, tick = self._wall_t0_ns, 0
         if now > wall_ns and flight.plant.tick > tick:
             values['loop_rate_hz'] = (flight.plant.tick - tick) / ((now - wall_ns) * 1e-9)
         level = DiagnosticStatus.WARN if values.get('failsafe_reason') else DiagnosticStatus.OK
@@ -143,6 +159,7 @@ class FlightBag:
     def _write_plant_status(self, flight, sensors, now):
         plant = flight.plant
         values = dict(mode='inprocess', sim_time_s=plant.t_s, tick=plant.tick,
+                      wall_time_s=(now - self._wall_t0_ns) * 1e-9,
                       in_contact=sensors.in_contact, rejected_commands=0)
         self._write(names.PLANT_STATUS, ros_msgs.diagnostics_msg(
             'plant', values, ros_msgs.to_stamp(plant.t_s)), now)

@@ -9,6 +9,7 @@ per task of the plan): how a user checks a world of their own in a minute, and w
 campaign runs for each draw. With ``--plan`` the controller's site (the wall and its target
 ids) comes from the scenario, as a survey would give it.
 """
+import argparse
 import json
 import sys
 import time
@@ -16,18 +17,26 @@ import time
 import numpy as np
 import yaml
 
-from uav_tilt_common.config import ConfigError, from_dict
+from uav_tilt_common.config import ConfigError, check_value, from_dict
 from uav_tilt_control.controller_core import ControllerConfig, plan_of
+from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.plant import PlantCoreConfig
-from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_tools import cli_args
+from uav_tilt_sim.scenario import Scenario, load_scenario
+from uav_tilt_common import cli_args
 from uav_tilt_tools.site_params import site_overrides
 from uav_tilt_tools.task_metrics import failure_of
 
 # a whole search (mission.search_timeout_s) and an inspection after it
 DURATION_S = 210.0
-__all__ = ['DURATION_S', 'check_plan', 'fly', 'jsonable', 'register',
+__all__ = ['DURATION_S', 'check_plan', 'default_duration_s', 'fly', 'jsonable', 'register',
            'site_overrides']
+
+
+def default_duration_s(plan):
+    """The simulated time a plan's flight is allowed: DURATION_S a task, plus the time its
+    tasks push beyond the default touch's hold (a long hold, a long or slow slide)."""
+    hold_s = MissionConfig().hold_time_s
+    return sum(DURATION_S + max(0.0, task.contact_s - hold_s) for task in plan)
 
 
 def fly(scenario, target_source='vision', overrides=None, duration_s=None, model_path='',
@@ -44,7 +53,7 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
     values = {'target_source': target_source, **(overrides or {})}
     config = from_dict(ControllerConfig, values)
     if duration_s is None:
-        duration_s = DURATION_S * len(plan_of(config))
+        duration_s = default_duration_s(plan_of(config))
     plant_config, vision = PlantCoreConfig(), None
     if target_source == 'vision':
         vision = camera_vision(plant_config, model_path, threads=threads)
@@ -80,14 +89,18 @@ def check_plan(scenario, plan_file, overrides=None):
     return overrides
 
 
+# Controller parameters that fly's own options set.
+OPTION_OF = {'target_source': '--target-source', 'plan_file': '--plan'}
+
+
 def _overrides(pairs):
     out = {}
     for pair in pairs or ():
         key, sep, text = pair.partition('=')
         if not sep:
             raise ConfigError(f"--set {pair!r}: expected KEY=VALUE")
-        if key == 'target_source':
-            raise ConfigError(f"--set {pair!r}: the target's source is --target-source")
+        if key in OPTION_OF:
+            raise ConfigError(f"--set {pair!r}: that is {OPTION_OF[key]}")
         try:
             out[key] = yaml.safe_load(text)
         except yaml.YAMLError as err:
@@ -95,22 +108,33 @@ def _overrides(pairs):
     return out
 
 
+def _scenario_seed(text):
+    """A seed in the range of a scenario's ``seed`` (argparse's error line when not)."""
+    try:
+        return check_value(Scenario, 'seed', cli_args.number(int, text))
+    except ConfigError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def register(sub):
     """Add the `fly` sub-command."""
     parser = sub.add_parser('fly', help='one inspection mission in-process (JSON summary)')
-    parser.add_argument('--scenario', required=True, help='scenario YAML (DESIGN section 5)')
+    parser.add_argument('--scenario', type=cli_args.path, required=True,
+                        help='scenario YAML (DESIGN section 5)')
     parser.add_argument('--target-source', choices=('vision', 'ground_truth'),
                         default='vision')
-    parser.add_argument('--seed', type=cli_args.scenario_seed, default=None,
+    parser.add_argument('--seed', type=_scenario_seed, default=None,
                         help="overrides the scenario's seed (wind, noise, textures)")
     parser.add_argument('--hint', type=float, nargs=2, metavar=('U', 'V'), default=None,
                         help="roughly where the target is on the scenario's wall [m]")
-    parser.add_argument('--plan', default=None, metavar='FILE',
+    parser.add_argument('--plan', type=cli_args.path, default=None, metavar='FILE',
                         help='an inspection plan (YAML: touch and slide tasks)')
     parser.add_argument('--set', action='append', metavar='KEY=VALUE',
                         help='a controller parameter, e.g. mission.hold_time_s=3')
     parser.add_argument('--duration', type=cli_args.duration_s, default=None,
-                        help=f'simulated seconds allowed (default {DURATION_S:.0f} per task)')
+                        help=f'simulated seconds allowed (default {DURATION_S:.0f} per task, '
+                             f'and the time it pushes beyond a {MissionConfig().hold_time_s:g} s '
+                             f'hold)')
     parser.set_defaults(func=_run)
 
 

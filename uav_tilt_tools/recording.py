@@ -31,34 +31,52 @@ REPORT_TOPICS = (names.CLOCK, names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET
                  names.TARGET_POSE, names.CAMERA_INFO, names.CONTROLLER_PLAN)
 # ... and every topic under these (each target's ground truth, by its id)
 REPORT_PREFIXES = (names.GROUND_TRUTH_TARGETS + '/',)
-# What reading a file that ends early may raise at its torn tail.
-TORN_TAIL = (McapError, EOFError, struct.error, ValueError)
+# What reading a file that ends early may raise at its torn tail (OSError: a seek before
+# the start of a file shorter than MCAP's footer).
+TORN_TAIL = (McapError, EOFError, struct.error, ValueError, OSError)
 
 
-class NotMcap(ValueError):
+class RecordingError(ValueError):
+    """A run that cannot be read as one recording: no MCAP file, or several."""
+
+
+class NotMcap(RecordingError):
     """A RUN_DIR/*.mcap that is no MCAP file."""
 
 
-def load_recording(run_dir, namespace=names.NAMESPACE, topics=REPORT_TOPICS, notes=None,
+def recording_file(run):
+    """The MCAP file of ``run``: the file itself, or the one ``*.mcap`` in the folder
+    (RecordingError when there is none, or several: the runs of a folder are not merged)."""
+    if os.path.isfile(run):
+        return run
+    if not os.path.isdir(run):
+        raise RecordingError(f'{run}: no such folder or file')
+    paths = sorted(glob.glob(os.path.join(run, '*.mcap')))
+    if not paths:
+        raise RecordingError(f'no *.mcap in {run}')
+    if len(paths) > 1:
+        raise RecordingError(f'{len(paths)} MCAP files in {run} '
+                             f'({", ".join(os.path.basename(p) for p in paths)}): '
+                             f'give the one to read')
+    return paths[0]
+
+
+def load_recording(run, namespace=names.NAMESPACE, topics=REPORT_TOPICS, notes=None,
                    prefixes=REPORT_PREFIXES):
-    """The recording of ``topics`` and of the topics under ``prefixes`` in every
-    RUN_DIR/*.mcap (FileNotFoundError if none, NotMcap for a file that is no MCAP).
+    """The recording of ``topics`` and of the topics under ``prefixes`` in the MCAP file of
+    ``run`` (:func:`recording_file`; NotMcap for a file that is no MCAP).
 
     A file without its summary (the recorder was killed) is read up to its last complete
     chunk; one line about it goes to ``notes`` (a list) when given.
     """
-    paths = sorted(glob.glob(os.path.join(run_dir, '*.mcap')))
-    if not paths:
-        raise FileNotFoundError(f'no *.mcap in {run_dir}')
+    path = recording_file(run)
     prefix = namespace.rstrip('/') + '/'
     absolute = {t if t.startswith('/') else prefix + t: t for t in topics}
     rec = {}
-    for path in paths:
-        complete, count = _read_mcap(path, absolute, (prefix, tuple(prefixes)), rec)
-        if not complete and notes is not None:
-            notes.append(f'{os.path.basename(path)} is incomplete (no footer: the recorder '
-                         f'did not finish); read {count} messages up to its last complete '
-                         f'chunk')
+    complete, count = _read_mcap(path, absolute, (prefix, tuple(prefixes)), rec)
+    if not complete and notes is not None:
+        notes.append(f'{os.path.basename(path)} is incomplete (no footer: the recorder did '
+                     f'not finish); read {count} messages up to its last complete chunk')
     return rec
 
 

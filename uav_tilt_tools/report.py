@@ -31,27 +31,29 @@ SUMMARY_KEYS = MISSION_KEYS + RUN_KEYS + ('tasks', 'failure')
 def register(sub):
     """Add the `report` sub-command."""
     parser = sub.add_parser('report', help='summary.json and plots of a recorded run')
-    parser.add_argument('run_dir', help='folder with the MCAP recording')
+    parser.add_argument('run_dir', help='folder with the MCAP recording, or the MCAP file')
     parser.set_defaults(func=run)
 
 
 def run(args):
-    """Write summary.json and the plots into the run folder; print the summary. Returns 0,
-    or 2 with one line on stderr when RUN_DIR holds no MCAP recording."""
+    """Write summary.json and the plots beside the recording; print the summary (stdout:
+    the JSON alone). Returns 0, or 2 with one line on stderr when RUN_DIR is no folder with
+    one MCAP recording, nor such a file."""
     from uav_tilt_tools.report_plots import write_plots   # matplotlib only when plotting
     notes = []
     try:
         rec = recording.load_recording(args.run_dir, notes=notes)
-    except (FileNotFoundError, recording.NotMcap) as err:
+    except recording.RecordingError as err:
         print(f'uav-tilt report: {err}', file=sys.stderr)
         return 2
     for note in notes:
-        print(f'uav-tilt report: {note}')
+        print(f'uav-tilt report: {note}', file=sys.stderr)
     tool_tip_x_m = VehicleParams().tool_tip_x_m
     summary = summarize(rec, tool_tip_x_m)
-    with open(os.path.join(args.run_dir, 'summary.json'), 'w', encoding='utf-8') as stream:
+    folder = os.path.dirname(recording.recording_file(args.run_dir)) or '.'
+    with open(os.path.join(folder, 'summary.json'), 'w', encoding='utf-8') as stream:
         json.dump(summary, stream, indent=2)
-    write_plots(rec, args.run_dir, tool_tip_x_m)
+    write_plots(rec, folder, tool_tip_x_m)
     print(json.dumps(summary))
     return 0
 

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from uav_tilt_tools import cli_args
+from uav_tilt_common import cli_args
 
 # Sequences longer than this print as a count, as image data would flood the terminal.
 MAX_SEQUENCE = 32

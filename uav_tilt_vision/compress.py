@@ -28,6 +28,7 @@ from typing import Any, Callable, Iterator, Sequence
 import numpy as np
 import torch
 
+from uav_tilt_common.config import ConfigError
 from uav_tilt_vision.detector import Detector, input_batch, load_model
 from uav_tilt_vision.profile import profile_model
 from uav_tilt_vision.train import card_path, evaluate, git_commit, train
@@ -36,6 +37,9 @@ from uav_tilt_vision.yolo_data import YoloDataset
 ONNX_OPSET = 17
 HEAD_OUTPUTS = ('head0', 'head1', 'head2', 'head3')
 CALIB_PERCENTILE = 99.999
+# torch-pruning leaves a conv whole when pruning would leave it fewer than round_to (8)
+# channels: above 0.75 it skips the 32-channel convs and, near 1, prunes nothing at all.
+MAX_PRUNING_RATIO = 0.75
 FLOAT_STEM_POOLS = 2   # the float stem ends with the second maxpool (stride 4)
 QUANTIZATION = ('onnxruntime static QDQ, per-channel int8 weights, uint8 activations, '
                 f'{CALIB_PERCENTILE} percentile calibration, head convs and the stride 1-2 '
@@ -43,13 +47,18 @@ QUANTIZATION = ('onnxruntime static QDQ, per-channel int8 weights, uint8 activat
 
 
 def prune(model: Detector, ratio: float, round_to: int = 8) -> Detector:
-    """Remove ``ratio`` of the channels of every conv except the heads, in place."""
+    """Remove ``ratio`` of the channels of every conv except the heads, in place; ConfigError
+    when no conv is wide enough to lose any (see ``MAX_PRUNING_RATIO``)."""
     import torch_pruning as tp
     example = torch.zeros(1, 3, model.img_size[1], model.img_size[0])
+    before = model.channels()
     pruner = tp.pruner.MetaPruner(
         model, example, importance=tp.importance.GroupMagnitudeImportance(p=2),
         pruning_ratio=ratio, ignored_layers=model.heads, round_to=round_to)
     pruner.step()
+    if model.channels() == before:
+        raise ConfigError(f'pruning ratio {ratio} removes no channel: each conv keeps at '
+                          f'least {round_to} of its {before}')
     return model
 
 
@@ -134,7 +143,7 @@ def size_stats(model: Detector) -> dict[str, int]:
 
 
 def compress(model_path: str | os.PathLike[str], data_dir: str | os.PathLike[str],
-             out_dir: str | os.PathLike[str], ratio: float = 0.5, finetune_epochs: int = 4,
+             out_dir: str | os.PathLike[str], ratio: float = 0.25, finetune_epochs: int = 4,
              seed: int = 0, calib_images: int = 128,
              eval_dir: str | os.PathLike[str] | None = None, lr: float = 1e-3,
              crop: Sequence[int] | None = None, distill_gain: float = 1.0,
@@ -171,10 +180,16 @@ def compress(model_path: str | os.PathLike[str], data_dir: str | os.PathLike[str
 def quantize(pruned_path: str | os.PathLike[str], data_dir: str | os.PathLike[str],
              calib_images: int = 128,
              eval_dir: str | os.PathLike[str] | None = None) -> dict[str, Any]:
-    """``detector_pruned.pt`` -> ``detector_int8.onnx`` (+ card) beside it; its report."""
+    """``detector_pruned.pt`` -> ``detector_int8.onnx`` (+ card) beside it; its report.
+
+    Calibrates on the first ``calib_images`` images of ``data_dir`` (all, if it has fewer).
+    """
     from uav_tilt_vision.backends import OnnxDetector
     pruned_path = Path(pruned_path)
     pruned = load_model(pruned_path)
+    # read every input before writing anything
+    source_card = json.loads(card_path(pruned_path).read_text())
+    calib_images = min(calib_images, len(YoloDataset(data_dir, pruned.img_size)))
     int8_path = pruned_path.parent / 'detector_int8.onnx'
     with tempfile.TemporaryDirectory() as tmp:
         fp32_onnx = Path(tmp) / 'pruned_fp32.onnx'
@@ -183,7 +198,6 @@ def quantize(pruned_path: str | os.PathLike[str], data_dir: str | os.PathLike[st
     report = {**size_stats(pruned), 'path': str(int8_path)}
     if eval_dir:
         report.update(evaluate(OnnxDetector(int8_path), eval_dir))
-    source_card = json.loads(card_path(pruned_path).read_text())
     int8_card = {'source': pruned_path.name, 'quantization': QUANTIZATION,
                  'calib_images': calib_images, 'calib_data': str(data_dir),
                  'data_seed': source_card.get('data_seed'), 'metrics': report,

@@ -33,6 +33,7 @@ import pybullet as p
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from uav_tilt_common.config import ConfigError
 from uav_tilt_common.pose import Pose
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim import textures
@@ -280,6 +281,17 @@ def label_text(rows: Iterable[Sequence[float]]) -> str:
     return ''.join(f'{int(r[0])} ' + ' '.join(f'{v:.6f}' for v in r[1:]) + '\n' for r in rows)
 
 
+def check_distance(distance_m: Sequence[float]) -> tuple[float, float]:
+    """(min, max) camera distance [m]; ConfigError unless 0 < min <= max <= the far clip
+    plane (beyond it the wall is not rendered)."""
+    lo, hi = (float(d) for d in distance_m)
+    far = CameraConfig().far_m
+    if not 0.0 < lo <= hi <= far:
+        raise ConfigError(f'camera distance range {[lo, hi]} must be 0 < MIN <= MAX <= {far} m '
+                          '(the camera\'s far clip plane)')
+    return lo, hi
+
+
 def generate(out: str | os.PathLike[str], n: int, seed: int = 0, split: str = 'train',
              jobs: int = 1, show_progress: bool = True, renderer: str = 'gl',
              distance_m: Sequence[float] = DISTANCE_M) -> dict[str, Any]:
@@ -292,12 +304,13 @@ def generate(out: str | os.PathLike[str], n: int, seed: int = 0, split: str = 't
     """
     if split not in SPLITS:
         raise ValueError(f'unknown split {split!r}; expected one of {tuple(SPLITS)}')
-    lo, hi = (float(d) for d in distance_m)
-    if not 0.0 < lo <= hi:
-        raise ValueError(f'distance_m must be 0 < min <= max, got {list(distance_m)}')
+    lo, hi = check_distance(distance_m)
     out = Path(out)
-    (out / 'images').mkdir(parents=True, exist_ok=True)
-    for folder in ('labels', 'ignore'):
+    for folder in ('images', 'labels', 'ignore'):
+        # a set already there would mix with this one, which meta.json alone describes
+        if (out / folder).is_dir() and any((out / folder).iterdir()):
+            raise ConfigError(f'{out}: already holds a data set ({folder}/ is not empty)')
+    for folder in ('images', 'labels', 'ignore'):
         (out / folder).mkdir(parents=True, exist_ok=True)
     worlds = [(str(out), seed, split, w, range(w * IMAGES_PER_WORLD,
                                                min((w + 1) * IMAGES_PER_WORLD, n)), renderer,

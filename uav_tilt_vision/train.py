@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence, TypeVar, ca
 import numpy as np
 import torch
 
+from uav_tilt_common.config import ConfigError
 from uav_tilt_vision.detector import DEFAULT_ANCHORS, IMG_SIZE, Detector, grow_scales, save_model
 from uav_tilt_vision.metrics import bootstrap, confidence_intervals, mean_ap
 from uav_tilt_vision.yolo_data import (HSV_GAINS, YoloDataset, collate, kmeans_anchors,
@@ -37,10 +38,20 @@ def progress(iterable: Iterable[T], **kwargs: Any) -> Iterable[T]:
 
 
 def resolve_device(device: str = 'auto') -> torch.device:
-    """'auto' -> CUDA when available, else CPU."""
+    """'auto' -> CUDA when available, else CPU; ConfigError for a device this machine lacks."""
     if device == 'auto':
         device = 'cuda' if torch.cuda.is_available() else 'cpu'
-    return torch.device(device)
+    try:
+        dev = torch.device(device)
+    except RuntimeError:
+        raise ConfigError(f'device {device!r}: not a torch device (auto, cpu, cuda, cuda:N)'
+                          ) from None
+    if dev.type == 'cuda' and (dev.index or 0) >= torch.cuda.device_count():
+        raise ConfigError(f'device {device!r}: this machine has '
+                          f'{torch.cuda.device_count()} CUDA devices')
+    if dev.type not in ('cpu', 'cuda'):
+        raise ConfigError(f'device {device!r}: only cpu and cuda are supported')
+    return dev
 
 
 def git_commit() -> str | None:
@@ -103,10 +114,14 @@ def train(data_dir: str | os.PathLike[str], out_path: str | os.PathLike[str], ep
     torch.backends.cudnn.benchmark = False
     if model is not None:
         img_size = model.img_size
+    if crop and not all(0 < c <= s for c, s in zip(crop, img_size)):
+        raise ConfigError(f'crop {list(crop)} must fit the {list(img_size)} input')
     ds = YoloDataset(data_dir, img_size, augment=augment, hflip=hflip, seed=seed,
                      crop=crop if augment else None, hsv=tuple(hsv))
     meta = read_meta(data_dir)
     n_cls = num_classes_of(ds, meta)
+    if model is not None and n_cls > model.num_classes:   # its heads cannot score the rest
+        raise ConfigError(f'{data_dir} has {n_cls} classes, the model {model.num_classes}')
     if model is None:
         if anchors is None:
             try:
@@ -190,19 +205,31 @@ def grown(model: Detector, scales: int, data_dir: str | os.PathLike[str]) -> Det
     """``model`` with finer heads added up to ``scales`` (``detector.grow_scales``) for the
     objects smaller than any anchor it has: the new anchors cluster (k-means) the set's
     labels of less area than its smallest anchor, the finest new head the smallest."""
+    new = scales - len(model.strides)
+    if new < 1:
+        raise ConfigError(f'cannot grow the model to {scales} scales: it has '
+                          f'{len(model.strides)}')
     wh = YoloDataset(data_dir, model.img_size).label_wh()
     smallest = float(model.anchors.prod(-1).min())
-    new = scales - len(model.strides)
-    return grow_scales(model, scales, kmeans_anchors(wh[wh.prod(1) < smallest], new))
+    try:
+        anchors = kmeans_anchors(wh[wh.prod(1) < smallest], new)
+    except ValueError as err:
+        raise ConfigError(f'{data_dir}: too few labels smaller than the model\'s anchors '
+                          f'to place {new} new heads\' anchors ({err})') from None
+    return grow_scales(model, scales, anchors)
 
 
 def check_teacher(teacher: Detector, model: Detector) -> None:
-    """ValueError unless ``teacher``'s heads and anchors match ``model``'s (distillation)."""
-    same = (teacher.num_classes == model.num_classes and teacher.img_size == model.img_size
-            and teacher.anchors.shape == model.anchors.shape
-            and torch.allclose(teacher.anchors.cpu(), model.anchors.cpu(), atol=1e-3))
-    if not same:
-        raise ValueError('teacher and model differ in classes, input size or anchors')
+    """ConfigError unless ``teacher``'s heads and anchors match ``model``'s (distillation)."""
+    t_anchors, m_anchors = teacher.anchors.cpu(), model.anchors.cpu()
+    # saved anchors are half precision (detector.save_model): 2**-11 relative rounding
+    differ = [what for what, same in (
+        ('classes', teacher.num_classes == model.num_classes),
+        ('input size', teacher.img_size == model.img_size),
+        ('anchors', t_anchors.shape == m_anchors.shape
+         and torch.allclose(t_anchors, m_anchors, rtol=1e-3, atol=0.0))) if not same]
+    if differ:
+        raise ConfigError(f'teacher and model differ in {" and ".join(differ)}')
 
 
 def ema_average(decay: float, ramp_steps: int = 500
@@ -271,6 +298,8 @@ def evaluate(model: 'Detector | TorchDetector | OnnxDetector', data_dir: str | o
     (``world_groups``; of its images where it does not say).
     """
     preds, gts, ignores = predict_set(model, data_dir, conf_thres, iou_thres, batch)
+    if not any(len(g) for g in gts):   # mAP is undefined
+        raise ConfigError(f'{data_dir}: no labelled objects to score')
     res = {**mean_ap(preds, gts, ignores), 'ignore_regions': sum(len(i) for i in ignores)}
     if resamples > 0:
         res['ci95'] = class_names(

@@ -6,17 +6,45 @@ Every sub-command prints one JSON object on stdout (progress bars go to stderr).
 import argparse
 import json
 import sys
-from typing import Any, Sequence
+from pathlib import Path
+from typing import Any, Callable, Sequence, TypeVar
 
 from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError
+from uav_tilt_common import cli_args
 
 MODELS = 'models'
+M = TypeVar('M')
 
 
 def log_stderr(line: str) -> None:
     """Progress lines go to stderr: stdout is the JSON result."""
     print(line, file=sys.stderr, flush=True)
+
+
+def _model_file(path: str, option: str, load: Callable[[Path], M]) -> tuple[Path, M]:
+    """The file ``path`` names (``resources.resolve``; as given when it is in the working
+    directory, which cards cite) and ``load`` of it; ConfigError naming it when it is not a
+    detector model."""
+    found = Path(path) if Path(path).is_file() else resources.resolve(path, option)
+    try:
+        return found, load(found)
+    except FileNotFoundError:   # e.g. the checkpoint an ONNX model falls back to
+        raise
+    except Exception as err:  # noqa: BLE001 - torch, pickle, protobuf and ONNX Runtime
+        # each raise their own errors on a file of another kind; long messages are not one line
+        reason = type(err).__name__ + (f': {err}' if len(str(err).splitlines()) == 1
+                                       and len(str(err)) <= 80 else '')
+        raise ConfigError(f'{path}: not a detector model ({reason})') from None
+
+
+def _checkpoint(path: str, option: str) -> tuple[Path, Any]:
+    """:func:`_model_file` of a ``Detector`` checkpoint (.pt), loaded."""
+    from uav_tilt_vision.detector import load_model
+    if Path(path).suffix == '.onnx':
+        raise ConfigError(f'{path}: not a detector model for {option}, which takes a .pt '
+                          'checkpoint, not ONNX')
+    return _model_file(path, option, load_model)
 
 
 def _dataset(a):
@@ -28,19 +56,20 @@ def _dataset(a):
 
 
 def _train(a):
-    from uav_tilt_vision.detector import IMG_SIZE, load_model, resize_input
+    from uav_tilt_vision.detector import IMG_SIZE, resize_input
     from uav_tilt_vision.train import card_path, grown, train
     from uav_tilt_vision.yolo_data import HSV_GAINS
     extra: dict[str, Any] = {'teacher': a.teacher} if a.teacher else {}
-    model = load_model(a.init) if a.init else None
+    init, model = _checkpoint(a.init, '--init') if a.init else (None, None)
+    teacher = _checkpoint(a.teacher, '--teacher')[1] if a.teacher else None
     if model is not None and a.img_size and tuple(a.img_size) != model.img_size:
         extra['resized_from'] = list(model.img_size)
         model = resize_input(model, a.img_size)
     if model is not None and a.grow_scales:   # main() refuses --grow-scales without --init
         extra['grown_from_scales'] = len(model.strides)
         model = grown(model, a.grow_scales, a.data)
-    if a.init:  # a continued run: its card names the stage it started from
-        prior = json.loads(card_path(a.init).read_text())
+    if init:  # a continued run: its card names the stage it started from
+        prior = json.loads(card_path(init).read_text())
         extra['init'] = {k: prior.get(k)
                          for k in ('epochs', 'seed', 'lr', 'crop', 'hsv', 'init', 'teacher',
                                    'bf16')}
@@ -50,7 +79,7 @@ def _train(a):
                  img_size=a.img_size or IMG_SIZE, workers=a.workers,
                  device=a.device, eval_dir=a.eval_data, crop=a.crop, scales=a.scales,
                  hsv=a.hsv or HSV_GAINS,
-                 model=model, teacher=load_model(a.teacher) if a.teacher else None,
+                 model=model, teacher=teacher,
                  distill_gain=a.distill_gain, card_extra=extra, bf16=a.bf16, log=log_stderr)
     return {k: v for k, v in card.items() if k != 'loss_history'}
 
@@ -58,64 +87,101 @@ def _train(a):
 def _eval(a):
     from uav_tilt_vision.backends import load_detector
     from uav_tilt_vision.train import evaluate
-    det = load_detector(resources.resolve(a.model, '--model'), a.backend)
-    return {**evaluate(det, a.data, resamples=a.bootstrap), 'model': a.model,
-            'backend_used': det.backend}
+    det = _model_file(a.model, '--model', lambda path: load_detector(path, a.backend))[1]
+    # the file scored: a fallback runs another one than --model, and says why in its note
+    return {**evaluate(det, a.data, resamples=a.bootstrap), 'model': det.model_path,
+            'backend_used': det.backend, 'note': det.note}
 
 
 def _compress(a):
     from uav_tilt_vision.compress import compress
-    return compress(a.model, a.data, a.out_dir, a.ratio, a.finetune_epochs, a.seed,
-                    a.calib_images, a.eval_data, crop=a.crop, distill_gain=a.distill_gain,
-                    bf16=a.bf16, device=a.device, workers=a.workers, log=log_stderr)
+    return compress(_checkpoint(a.model, '--model')[0], a.data, a.out_dir, a.ratio,
+                    a.finetune_epochs, a.seed, a.calib_images, a.eval_data, crop=a.crop,
+                    distill_gain=a.distill_gain, bf16=a.bf16, device=a.device,
+                    workers=a.workers, log=log_stderr)
 
 
 def _quantize(a):
     from uav_tilt_vision.compress import quantize
-    return quantize(a.model, a.data, a.calib_images, a.eval_data)
+    return quantize(_checkpoint(a.model, '--model')[0], a.data, a.calib_images,
+                    a.eval_data)
 
 
 def _profile(a):
     from uav_tilt_vision.profile import report
-    return report(resources.resolve(m, '--model') for m in a.model)
+    return report([_checkpoint(m, '--model')[0] for m in a.model])
+
+
+def _device(text: str) -> str:
+    """A torch device this machine has, or 'auto' (``train.resolve_device``)."""
+    from uav_tilt_vision.train import resolve_device
+    try:
+        resolve_device(text)
+    except ConfigError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    return text
+
+
+def _pruning_ratio(text: str) -> float:
+    """A channel pruning ratio that torch-pruning honours (``compress.MAX_PRUNING_RATIO``)."""
+    from uav_tilt_vision.compress import MAX_PRUNING_RATIO
+    return cli_args.ratio_up_to(MAX_PRUNING_RATIO)(text)
+
+
+class _Defaults(argparse.ArgumentDefaultsHelpFormatter):
+    """Help that shows the options' default values (not the absent ones: None, False)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.default is None or action.default is False:
+            return action.help
+        return super()._get_help_string(action)
 
 
 def parser() -> argparse.ArgumentParser:
     """The argparse parser of the vision sub-commands."""
     ap = argparse.ArgumentParser(prog='uav-tilt vision', description=__doc__)
-    ap.add_argument('--threads', type=int, default=0, help='torch CPU threads (0: default)')
+    ap.add_argument('--threads', type=cli_args.non_negative, default=0,
+                    help='torch CPU threads (0: default)')
     sub = ap.add_subparsers(dest='command', required=True)
-    d = sub.add_parser('dataset', help='render a labelled, domain-randomised image set')
-    d.add_argument('--out', required=True)
-    d.add_argument('--n', type=int, required=True)
-    d.add_argument('--seed', type=int, default=0)
-    d.add_argument('--split', choices=('train', 'heldout'), default='train')
-    d.add_argument('--jobs', type=int, default=1, help='render processes')
+
+    def command(name: str, **kw: Any) -> argparse.ArgumentParser:
+        return sub.add_parser(name, formatter_class=_Defaults, **kw)
+
+    d = command('dataset', help='render a labelled, domain-randomised image set')
+    d.add_argument('--out', required=True, help='a new or empty folder')
+    d.add_argument('--n', type=cli_args.count, required=True, help='images')
+    d.add_argument('--seed', type=cli_args.seed, default=0, help='random seed')
+    d.add_argument('--split', choices=('train', 'heldout'), default='train',
+                   help='which worlds, textures and lighting to draw from')
+    d.add_argument('--jobs', type=cli_args.count, default=1, help='render processes')
     d.add_argument('--renderer', choices=('gl', 'tiny'), default='gl',
                    help="the camera's renderer (train on the plant's: gl)")
-    d.add_argument('--distance-m', type=float, nargs=2, metavar=('MIN', 'MAX'),
-                   help='camera distance range, log-uniform (default dataset.DISTANCE_M: the '
-                        'mission\'s ranges)')
+    d.add_argument('--distance-m', type=cli_args.positive, nargs=2, metavar=('MIN', 'MAX'),
+                   help='camera distance range, log-uniform, up to the camera\'s far clip '
+                        'plane (default dataset.DISTANCE_M: the mission\'s ranges)')
     d.set_defaults(run=_dataset)
-    t = sub.add_parser('train', help='train the fp32 detector; writes weights + model card')
+    t = command('train', help='train the fp32 detector; writes weights + model card')
     t.add_argument('--data', required=True)
-    t.add_argument('--out', default=f'{MODELS}/detector_fp32.pt')
-    t.add_argument('--epochs', type=int, default=16)
-    t.add_argument('--seed', type=int, default=0)
-    t.add_argument('--width-mult', type=float, default=0.5)
+    t.add_argument('--out', default=f'{MODELS}/detector_fp32.pt', help='weights; the card beside')
+    t.add_argument('--epochs', type=cli_args.count, default=16, help='passes over --data')
+    t.add_argument('--seed', type=cli_args.seed, default=0, help='random seed')
+    t.add_argument('--width-mult', type=cli_args.positive, default=0.5,
+                   help="channels relative to YOLOv3-tiny's")
     t.add_argument('--scales', type=int, default=3, choices=(2, 3, 4),
                    help='detection heads: 2 = YOLOv3-tiny, 3 = with a stride-8 head, '
                         '4 = and a stride-4 head')
-    t.add_argument('--batch', type=int, default=16)
+    t.add_argument('--batch', type=cli_args.count, default=16, help='images per step')
     t.add_argument('--img-size', type=int, nargs=2, metavar=('W', 'H'),
                    help='network input, multiples of 32 (default detector.IMG_SIZE; with '
                         '--init: that model\'s, or this one, weights and anchors kept)')
-    t.add_argument('--workers', type=int, default=0, help='data loader processes')
-    t.add_argument('--lr', type=float, default=3e-3)
-    t.add_argument('--device', default='auto')
+    t.add_argument('--workers', type=cli_args.non_negative, default=0,
+                   help='data loader processes')
+    t.add_argument('--lr', type=cli_args.positive, default=3e-3, help='peak learning rate')
+    t.add_argument('--device', type=_device, default='auto', help='auto: a GPU if any')
     t.add_argument('--eval-data', help='held-out set whose mAP goes in the model card')
     t.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
-                   help='train on object-centred W x H windows (multiples of 32)')
+                   help='train on object-centred W x H windows (multiples of 32, within the '
+                        'input)')
     t.add_argument('--init', help='continue from this checkpoint (its card is cited)')
     t.add_argument('--grow-scales', type=int, choices=(3, 4),
                    help='add finer heads to the --init model up to this many scales (their '
@@ -123,49 +189,59 @@ def parser() -> argparse.ArgumentParser:
                         'its other weights are kept')
     t.add_argument('--teacher', help='also learn to match this model\'s outputs (distillation; '
                                      'same classes, input size and anchors)')
-    t.add_argument('--distill-gain', type=float, default=1.0,
+    t.add_argument('--distill-gain', type=cli_args.non_negative_number, default=1.0,
                    help='weight of the distillation loss (with --teacher)')
-    t.add_argument('--hsv', type=float, nargs=3, metavar=('H', 'S', 'V'),
-                   help='hue, saturation, value jitter of the augmentation (fractions; '
+    t.add_argument('--hsv', type=cli_args.fraction, nargs=3, metavar=('H', 'S', 'V'),
+                   help='hue, saturation, value jitter of the augmentation (fractions, 0-1; '
                         'default yolo_data.HSV_GAINS)')
     t.add_argument('--bf16', action='store_true',
                    help='bfloat16 autocast for the forward passes (faster on CPUs with '
                         'AVX-512 BF16 and on GPUs)')
     t.set_defaults(run=_train)
-    e = sub.add_parser('eval', help='COCO mAP of a model on a YOLO-format set')
+    e = command('eval', help='COCO mAP of a model on a YOLO-format set')
     e.add_argument('--data', required=True)
-    e.add_argument('--model', default=f'{MODELS}/detector_fp32.pt')
-    e.add_argument('--backend', default='auto', choices=('auto', 'torch', 'onnxruntime'))
-    e.add_argument('--bootstrap', type=int, default=0, metavar='N',
+    e.add_argument('--model', default=f'{MODELS}/detector_fp32.pt', help='.pt or .onnx')
+    e.add_argument('--backend', default='auto', choices=('auto', 'torch', 'onnxruntime'),
+                   help='auto: by the file suffix')
+    e.add_argument('--bootstrap', type=cli_args.non_negative, default=0, metavar='N',
                    help='add 95%% confidence intervals (ci95) from N resamplings of the '
                         'set\'s worlds')
     e.set_defaults(run=_eval)
-    c = sub.add_parser('compress', help='prune + fine-tune, then int8 ONNX (static QDQ)')
-    c.add_argument('--model', default=f'{MODELS}/detector_fp32.pt')
+    c = command('compress', help='prune + fine-tune, then int8 ONNX (static QDQ)')
+    c.add_argument('--model', default=f'{MODELS}/detector_fp32.pt',
+                   help='the fp32 .pt to compress')
     c.add_argument('--data', required=True, help='training set (fine-tuning, calibration)')
-    c.add_argument('--out-dir', default=MODELS)
-    c.add_argument('--ratio', type=float, default=0.5, help='channel pruning ratio')
-    c.add_argument('--finetune-epochs', type=int, default=4)
-    c.add_argument('--seed', type=int, default=0)
-    c.add_argument('--calib-images', type=int, default=128)
+    c.add_argument('--out-dir', default=MODELS, help='where the pruned and int8 models go')
+    c.add_argument('--ratio', type=_pruning_ratio, default=0.25,
+                   help='channel pruning ratio, above 0 and at most '
+                        'compress.MAX_PRUNING_RATIO')
+    c.add_argument('--finetune-epochs', type=cli_args.count, default=4,
+                   help='epochs of fine-tuning after pruning')
+    c.add_argument('--seed', type=cli_args.seed, default=0, help='random seed')
+    c.add_argument('--calib-images', type=cli_args.count, default=128,
+                   help='calibrate on this many images of --data (all, if it has fewer)')
     c.add_argument('--eval-data', help='held-out set evaluated for every stage')
     c.add_argument('--crop', type=int, nargs=2, metavar=('W', 'H'),
-                   help='fine-tune on object-centred W x H windows')
-    c.add_argument('--distill-gain', type=float, default=1.0,
+                   help='fine-tune on object-centred W x H windows (multiples of 32)')
+    c.add_argument('--distill-gain', type=cli_args.non_negative_number, default=1.0,
                    help='fine-tune also matching the unpruned model\'s outputs with this '
                         'weight (0: labels only)')
     c.add_argument('--bf16', action='store_true',
                    help='bfloat16 autocast for the fine-tuning\'s forward passes')
-    c.add_argument('--device', default='auto', help='fine-tuning device (auto: a GPU if any)')
-    c.add_argument('--workers', type=int, default=0, help='data loader processes')
+    c.add_argument('--device', type=_device, default='auto',
+                   help='fine-tuning device (auto: a GPU if any)')
+    c.add_argument('--workers', type=cli_args.non_negative, default=0,
+                   help='data loader processes')
     c.set_defaults(run=_compress)
-    q = sub.add_parser('quantize', help='int8 ONNX of a pruned model only (compress step 3)')
-    q.add_argument('--model', default=f'{MODELS}/detector_pruned.pt')
+    q = command('quantize', help='int8 ONNX of a pruned model only (compress step 3)')
+    q.add_argument('--model', default=f'{MODELS}/detector_pruned.pt',
+                   help='the pruned .pt (its card beside it)')
     q.add_argument('--data', required=True, help='training set (calibration)')
-    q.add_argument('--calib-images', type=int, default=128)
+    q.add_argument('--calib-images', type=cli_args.count, default=128,
+                   help='calibrate on this many images of --data (all, if it has fewer)')
     q.add_argument('--eval-data', help='held-out set to evaluate the int8 model on')
     q.set_defaults(run=_quantize)
-    p = sub.add_parser('profile', help='params and MACs per layer type vs YOLOv3-tiny')
+    p = command('profile', help='params and MACs per layer type vs YOLOv3-tiny')
     p.add_argument('--model', nargs='*', default=[f'{MODELS}/detector_fp32.pt',
                                                   f'{MODELS}/detector_pruned.pt'],
                    help='.pt models to profile beside the references')
@@ -183,17 +259,22 @@ def register(sub: 'argparse._SubParsersAction[Any]') -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv``, run the sub-command, print its JSON result; returns 0, or 2 with one
-    line on stderr when a file or folder it reads is missing."""
+    line on stderr for a bad input (an option's value, a file or folder it reads)."""
     ap = parser()
     a = ap.parse_args(argv)
     if getattr(a, 'grow_scales', None) and not a.init:
         ap.error('--grow-scales needs --init (the model to grow)')
-    if getattr(a, 'img_size', None) and any(v <= 0 or v % 32 for v in a.img_size):
-        ap.error(f'--img-size must be positive multiples of 32, got {a.img_size}')
-    if getattr(a, 'distance_m', None) and not 0.0 < a.distance_m[0] <= a.distance_m[1]:
-        ap.error(f'--distance-m must be 0 < MIN <= MAX, got {a.distance_m}')
-    if getattr(a, 'bootstrap', 0) < 0:
-        ap.error(f'--bootstrap must be 0 or more, got {a.bootstrap}')
+    for option in ('img_size', 'crop'):    # the network's input: whole stride-32 cells
+        values = getattr(a, option, None)
+        if values and any(v <= 0 or v % 32 for v in values):
+            ap.error(f'--{option.replace("_", "-")} must be positive multiples of 32, '
+                     f'got {values}')
+    if getattr(a, 'distance_m', None):
+        from uav_tilt_vision.dataset import check_distance
+        try:
+            check_distance(a.distance_m)
+        except ConfigError as err:
+            ap.error(f'--distance-m: {err}')
     if a.threads:
         import torch
         torch.set_num_threads(a.threads)

@@ -17,6 +17,7 @@ import numpy as np
 import torch
 from numpy.typing import ArrayLike, NDArray
 
+from uav_tilt_common.config import ConfigError
 from uav_tilt_vision.boxes import letterbox, wh_iou, xywh_to_xyxy, xyxy_to_xywh
 from uav_tilt_vision.detector import IMG_SIZE
 
@@ -35,13 +36,36 @@ def read_meta(root: str | os.PathLike[str]) -> dict[str, Any]:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
-def read_labels(path: str | os.PathLike[str]) -> NDArray[np.float64]:
-    """(n, 5) float array [class, cx, cy, w, h] (normalised) from a label file; missing = empty."""
+def read_labels(path: str | os.PathLike[str], num_classes: int | None = None
+                ) -> NDArray[np.float64]:
+    """(n, 5) float array [class, cx, cy, w, h] (normalised) from a label file; missing = empty.
+
+    ConfigError naming the file and line unless every line holds an integer class (below
+    ``num_classes`` when given) and four finite numbers.
+    """
     path = Path(path)
-    text = path.read_text().strip() if path.is_file() else ''
-    if not text:
-        return np.zeros((0, 5))
-    return np.array([line.split() for line in text.splitlines()], dtype=np.float64).reshape(-1, 5)
+    text = path.read_text() if path.is_file() else ''
+    rows = []
+    for n, line in enumerate(text.splitlines(), 1):
+        if line.strip():
+            rows.append(_label_row(line, num_classes, f'{path}:{n}'))
+    return np.array(rows, dtype=np.float64).reshape(-1, 5)
+
+
+def _label_row(line: str, num_classes: int | None, where: str) -> list[float]:
+    fields = line.split()
+    try:
+        row = [float(v) for v in fields]
+    except ValueError:
+        row = []
+    if len(fields) != 5 or len(row) != 5 or not np.all(np.isfinite(row)):
+        raise ConfigError(f'{where}: expected a label "class cx cy w h" (5 numbers), '
+                          f'got {line.strip()!r}')
+    cls = row[0]
+    if not (cls.is_integer() and 0 <= cls < (num_classes or np.inf)):
+        known = f'0 to {num_classes - 1}' if num_classes else 'an integer of at least 0'
+        raise ConfigError(f'{where}: class {fields[0]!r} is not a known class ({known})')
+    return row
 
 
 def hsv_jitter(img: np.ndarray, gains: Sequence[float], rng: np.random.Generator) -> np.ndarray:
@@ -76,6 +100,9 @@ class YoloDataset(torch.utils.data.Dataset):
                              if p.suffix.lower() in IMG_EXTS)
         if not self.images:
             raise FileNotFoundError(f'no images in {self.root / "images"}')
+        if not (self.root / 'labels').is_dir():     # else every image reads as background
+            raise ConfigError(f'{self.root}: no labels/ folder beside images/')
+        self.num_classes = len(read_meta(self.root).get('classes') or ()) or None
         self.img_size = tuple(img_size)
         self.augment, self.hflip, self.hsv = augment, hflip, hsv
         self.seed, self.epoch, self.crop = seed, 0, crop
@@ -89,14 +116,16 @@ class YoloDataset(torch.utils.data.Dataset):
 
     def read_rgb(self, i: int) -> np.ndarray:
         """Original image i as uint8 RGB."""
-        # an unreadable file (imread gives None) raises in cvtColor
         bgr = cv2.imread(str(self.images[i]), cv2.IMREAD_COLOR)
-        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)  # type: ignore[arg-type]
+        if bgr is None:
+            raise ConfigError(f'{self.images[i]}: not a readable image')
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
     def labels(self, i: int, folder: str = 'labels') -> NDArray[np.float64]:
         """Normalised labels of image i, (n, 5) [class, cx, cy, w, h]; ``folder='ignore'``
         gives its ignore regions instead."""
-        return read_labels(self.root / folder / (self.images[i].stem + '.txt'))
+        return read_labels(self.root / folder / (self.images[i].stem + '.txt'),
+                           self.num_classes)
 
     def ground_truth(self, i: int, shape: Sequence[int], folder: str = 'labels'
                      ) -> NDArray[np.float64]:
