@@ -289,6 +289,16 @@ def test_nan_setpoint_rejected_and_counted():
         ok, msg = flight.mission.set_hover_setpoint([0.0, 0.0, z], 0.0)
         assert not ok and 'lowest hover' in msg, msg
     assert flight.mission.status['rejected_setpoints'] == 4
+    # outside the geofence: too far from the take-off, too high
+    home = flight.p.copy()
+    radius_m, height_m = cfg.fence_radius_m, cfg.fence_height_m
+    for p, why in (([home[0] + radius_m + 0.1, home[1], 2.0], 'fence_radius_m'),
+                   ([home[0], home[1] - 1e12, 2.0], 'fence_radius_m'),
+                   ([home[0], home[1], cfg.ground_z_m + height_m + 0.1], 'fence_height_m')):
+        ok, msg = flight.mission.set_hover_setpoint(p, 0.0)
+        assert not ok and 'geofence' in msg and why in msg, msg
+    assert flight.mission.status['rejected_setpoints'] == 7
+    assert flight.mission.set_hover_setpoint([home[0] + 0.7 * radius_m, home[1], 2.0], 0.0)[0]
     assert flight.mission.mode == Mode.HOVER
     ok, _ = flight.mission.set_hover_setpoint([1.0, -1.0, 2.0], 0.5)
     assert ok

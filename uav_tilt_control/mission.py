@@ -162,6 +162,10 @@ class MissionConfig:
     failsafe_land_margin_s: float = param(2.0, lo=0.0, hi=60.0)  # blind: after the descent
     ground_z_m: float = param(0.0, lo=-100.0, hi=100.0)
     land_detect_height_m: float = param(0.3, lo=0.0, hi=2.0)  # above ground_z_m
+    # Geofence (as PX4's GF_MAX_HOR_DIST and GF_MAX_VER_DIST): a hover setpoint farther than
+    # this from where the vehicle took off, or higher above ground_z_m, is refused.
+    fence_radius_m: float = param(100.0, lo=1.0, hi=1e4)
+    fence_height_m: float = param(30.0, lo=1.0, hi=1e3)
     land_detect_speed_m_s: float = param(0.1, lo=0.01, hi=1.0)
     land_detect_s: float = param(0.5, lo=0.0, hi=10.0)
     # Arrival and landing ask whether the vehicle is still, which is its mean speed over a
@@ -359,6 +363,7 @@ class Mission:
         self._failsafe_reason = ''
         self.contact_lost = 0
         self.rejected_setpoints = 0
+        self._home_map = None           # where it last took off (the geofence's centre)
         self.events = collections.deque(maxlen=200)
 
     @property
@@ -493,9 +498,25 @@ class Mission:
             self.rejected_setpoints += 1
             return False, (f'setpoint z {p[2]:g} m is below the lowest hover, {lowest_m:g} m '
                            f'(ground_z_m + 2 land_detect_height_m; land to go lower)')
+        outside = self._outside_fence(p)
+        if outside:
+            self.rejected_setpoints += 1
+            return False, f'setpoint {p.tolist()} is outside the geofence: {outside}'
         self._plan(p, self.config.hover_speed_m_s)
         self._yaw_goal = float(yaw_rad)
         return True, 'setpoint accepted'
+
+    def _outside_fence(self, p_map):
+        """Why ``p_map`` is outside the geofence (mission.fence_*), or ''."""
+        cfg = self.config
+        if p_map[2] - cfg.ground_z_m > cfg.fence_height_m:
+            return f'{p_map[2] - cfg.ground_z_m:g} m above the ground (fence_height_m ' \
+                   f'{cfg.fence_height_m:g})'
+        if self._home_map is not None:
+            radius_m = float(np.hypot(*(p_map[:2] - self._home_map[:2])))
+            if radius_m > cfg.fence_radius_m:
+                return f'{radius_m:g} m from the take-off (fence_radius_m {cfg.fence_radius_m:g})'
+        return ''
 
     # ---- the tick ----
 
@@ -652,6 +673,7 @@ class Mission:
     def _enter_takeoff(self, previous, target):
         cfg = self.config
         p_meas = self._state.p_map
+        self._home_map = p_meas.copy()
         goal = np.array([p_meas[0], p_meas[1], cfg.takeoff_altitude_m])
         self._to_map()
         self._traj = MinJerk(self._now_s, p_meas, goal, cfg.climb_speed_m_s)
