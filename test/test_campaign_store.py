@@ -74,6 +74,19 @@ def test_resume_refuses_another_campaign(tmp_path):
         cp.campaign(1, SEED + 1, duration_s=0.1, progress=False, out=tmp_path, resume=True)
 
 
+def test_a_plan_resumes_however_its_path_is_written(tmp_path):
+    config = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                          'config')
+    files = dict(plan_file=os.path.join(config, 'plans', 'inspection.yaml'),
+                 scenario_file=os.path.join(config, 'scenarios', 'plan.yaml'))
+    cp.campaign(1, SEED, duration_s=0.1, progress=False, out=tmp_path,
+                **{k: v.replace(os.sep + 'config' + os.sep, os.sep + 'config' + os.sep + '.'
+                                + os.sep) for k, v in files.items()})
+    result = cp.campaign(1, SEED, duration_s=0.1, progress=False, out=tmp_path, resume=True,
+                         **files)
+    assert result['n'] == 1
+
+
 def test_a_damaged_store_is_refused_and_keeps_its_runs(tmp_path):
     out = tmp_path / 'store'
     cp.campaign(3, SEED, duration_s=0.1, progress=False, out=out)

@@ -69,6 +69,7 @@ def test_a_bad_plan_file_is_one_line(tmp_path, capsys, plan, words):
     (['--set', 'target_source=vision'], ['--target-source']),
     # the plan is --plan's: a second one in --set was left unflown without a word
     (['--plan', 'config/plans/inspection.yaml', '--set', 'plan_file=other.yaml'], ['--plan']),
+    (['--plan', 'config/plans/inspection.yaml', '--hint', '0', '1'], ['--hint', 'near_uv_m']),
     # a hint is good to 0.3 m: one farther off the 5 m x 3.5 m wall is a mistake
     (['--hint', '100', '100'], ["'site.target_hint_uv_m'", 'off the wall']),
     (['--hint', '2.85', '1.0'], ["'site.target_hint_uv_m'", 'off the wall']),

@@ -227,8 +227,10 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=Non
     store = None
     if out is not None:
         from uav_tilt_tools.campaign_store import RunStore
+        # files as the same path however written ('./a.yaml', 'a.yaml'), for the resume
         args = dict(n=n, seed=seed, target_source=target_source, duration_s=duration_s,
-                    plan_file=plan_file, scenario_file=scenario_file)
+                    plan_file=plan_file and os.path.normpath(plan_file),
+                    scenario_file=scenario_file and os.path.normpath(scenario_file))
         if corners:     # only then, so that folders of earlier campaigns still resume
             args['corners'] = True
         store = RunStore(out, args, resume)

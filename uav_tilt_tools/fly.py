@@ -144,6 +144,9 @@ def _run(args):
         if args.seed is not None:
             scenario.seed = args.seed
         overrides = {**_overrides(args.set)}
+        if args.hint is not None and args.plan:
+            raise ConfigError('--hint is where the one-touch inspection looks; a plan\'s '
+                              'touches say it in their near_uv_m')
         if args.hint is not None:
             overrides.update(site_overrides(scenario, args.hint))
         if args.plan:
