@@ -31,6 +31,11 @@ def test_a_missing_scenario_is_one_line_naming_the_parameter(path):
     assert '\n' not in message and "'scenario_file'" in message and 'no such file' in message
 
 
+def test_a_folder_given_for_a_file_is_named_so(tmp_path):
+    with pytest.raises(ConfigError, match=f'{tmp_path} is a folder, not a file'):
+        load_scenario(str(tmp_path))
+
+
 def test_an_unreadable_scenario_is_one_line(tmp_path):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('wall: [unclosed\n')

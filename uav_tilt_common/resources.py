@@ -60,6 +60,10 @@ def resolve(path: str | os.PathLike[str], parameter: str) -> pathlib.Path:
     for candidate in found:
         if candidate.is_file():
             return candidate
+    folder = next((c for c in found if c.is_dir()), None)
+    if folder is not None:
+        raise ConfigError(f"parameter '{parameter}' = {str(path)!r}: {folder} is a folder, "
+                          f"not a file")
     looked = ' or '.join(str(c) for c in found)
     raise ConfigError(f"parameter '{parameter}' = {str(path)!r}: no such file ({looked})")
 
