@@ -28,11 +28,11 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'plant_node = uav_tilt_sim.plant_node:main',
-            'controller_node = uav_tilt_control.controller_node:main',
-            'vision_node = uav_tilt_vision.vision_node:main',
-            'recorder_node = uav_tilt_tools.recorder_node:main',
-            'foxglove_bridge = uav_tilt_tools.foxglove_bridge:main',
+            'plant_node = uav_tilt_common.node_entry:plant',
+            'controller_node = uav_tilt_common.node_entry:controller',
+            'vision_node = uav_tilt_common.node_entry:vision',
+            'recorder_node = uav_tilt_common.node_entry:recorder',
+            'foxglove_bridge = uav_tilt_common.node_entry:foxglove',
             'uav-tilt = uav_tilt_tools.cli:main',
         ],
     },

@@ -119,6 +119,19 @@ def test_ctrl_c_mid_mission_leaves_a_complete_recording(tmp_path, probe):
     assert 'TAKEOFF' in modes
 
 
+@pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_signal_while_a_node_starts_ends_it_quietly(tmp_path, stop):
+    """The executables launch.sh starts: a Ctrl-C in the seconds vision spends importing
+    torch printed a KeyboardInterrupt traceback and exited 130."""
+    node = subprocess.Popen([os.path.join(os.path.dirname(sys.executable), 'vision_node')],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    time.sleep(0.5)     # started, still importing (torch alone takes seconds)
+    node.send_signal(stop)
+    _, err = node.communicate(timeout=SHUTDOWN_S)
+    assert node.returncode == 0 and 'Traceback' not in err, err
+
+
 def test_a_dying_node_fails_the_launch_and_stops_the_others(tmp_path, probe):
     launch, log_path, nodes = start_graph(tmp_path, probe)
     plant = next(pid for pid, cmd in nodes.items() if 'plant_node' in cmd)

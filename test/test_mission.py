@@ -868,6 +868,42 @@ def test_abort_in_contact_retreats_then_hovers():
     assert flight.mission.mode == Mode.HOVER
 
 
+def _out_from_wall(flight):
+    """The vehicle's distance out of the target's wall (along its normal)."""
+    return float((flight.p - PERFECT.p_poi_map) @ PERFECT.normal_map)
+
+
+@pytest.mark.parametrize('call, then', [('abort', Mode.HOVER), ('land', Mode.LAND)])
+def test_abort_or_land_on_the_way_to_the_wall_stops_short_of_it(call, then):
+    # an approach still far out has nothing to retreat from: RETREAT would fly on to the
+    # standoff, towards the wall
+    flight = _in_mode(Mode.APPROACH)
+    flight.run_for(float(np.random.default_rng().uniform(0.5, 2.0)))
+    out_m = _out_from_wall(flight)
+    assert out_m > flight.config.standoff_m + VEHICLE.tool_tip_x_m + 0.2
+    ok, _ = getattr(flight.mission, call)()
+    assert ok and flight.mission.mode == then
+    nearest_m = out_m
+    for _ in range(int(10.0 / DT_S)):
+        flight.step()
+        nearest_m = min(nearest_m, _out_from_wall(flight))
+    # it stops within its braking distance: at 0.3 m/s and 1 m/s^2, under 5 cm
+    assert nearest_m > out_m - 0.05, (out_m, nearest_m)
+    assert flight.mission.mode == (Mode.HOVER if call == 'abort' else Mode.IDLE)
+
+
+def test_abort_just_after_take_off_lands_rather_than_hover_on_the_ground():
+    flight = Flight()
+    assert flight.mission.takeoff()[0]
+    flight.run_for(0.3)
+    assert flight.mission.abort() == (True, 'landing: too low to hover')
+    flight.run_to(Mode.IDLE, timeout_s=20.0)
+    # high enough, abort hovers there
+    assert flight.mission.takeoff()[0]
+    flight.run_until(lambda f: f.p[2] > f.config.lowest_hover_m() + 0.1, 20.0)
+    assert flight.mission.abort() == (True, 'hovering')
+
+
 def test_abort_in_search_hovers_and_land_lands():
     flight = _in_mode(Mode.SEARCH)
     assert flight.mission.abort() == (True, 'hovering')

@@ -17,6 +17,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 from uav_tilt_common import parent_watch
+from uav_tilt_common.node_entry import STOP_SIGNALS
 from uav_tilt_common.config import ConfigError, ConfigT, check_field, check_value, \
     description, fields_flat, from_dict, replace_flat
 from uav_tilt_common.ros_spin import spin_events
@@ -177,9 +178,6 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) ->
             node.destroy_node()
         rclpy.try_shutdown()
     return code
-
-
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def note_stop_signals() -> Future:

@@ -450,16 +450,22 @@ class Mission:
         return True, 'taking off for inspection'
 
     def abort(self):
-        """Stop the plan: leave the wall (RETREAT) when near it, else stop and HOVER."""
+        """Stop the plan: leave the wall (RETREAT) when near it, else stop and HOVER (land
+        when still too low to hover)."""
         self._inspect_pending = False
-        if self._mode in NEAR_WALL or self._mode == Mode.RETREAT:
+        if self._at_wall():
             self._stop_plan('aborted')
             self._after_retreat = Mode.HOVER
             if self._mode != Mode.RETREAT:
                 self._enter(Mode.RETREAT, 'abort')
             return True, 'retreating from the wall'
-        if self._mode in (Mode.TAKEOFF, Mode.SEARCH, Mode.LAND, Mode.HOVER):
+        if self._mode in (Mode.TAKEOFF, Mode.SEARCH, Mode.LAND, Mode.HOVER, Mode.APPROACH):
             self._stop_plan('aborted')
+            if self._mode == Mode.TAKEOFF and \
+                    self._ref_map()[0][2] < self.config.lowest_hover_m():
+                # HOVER here would leave the rotors running on the ground
+                self._enter(Mode.LAND, 'abort below the lowest hover')
+                return True, 'landing: too low to hover'
             if self._mode != Mode.HOVER:
                 self._enter(Mode.HOVER, 'abort')
             elif self._flight_phase:
@@ -471,13 +477,13 @@ class Mission:
     def land(self):
         """Stop the plan and land here; near the wall retreat first."""
         self._inspect_pending = False
-        if self._mode in NEAR_WALL or self._mode == Mode.RETREAT:
+        if self._at_wall():
             self._stop_plan('land_requested')
             self._after_retreat = Mode.LAND
             if self._mode != Mode.RETREAT:
                 self._enter(Mode.RETREAT, 'land requested')
             return True, 'retreating, then landing'
-        if self._mode in (Mode.TAKEOFF, Mode.HOVER, Mode.SEARCH, Mode.LAND):
+        if self._mode in (Mode.TAKEOFF, Mode.HOVER, Mode.SEARCH, Mode.LAND, Mode.APPROACH):
             self._stop_plan('land_requested')
             if self._mode != Mode.LAND:
                 self._enter(Mode.LAND)
@@ -505,6 +511,14 @@ class Mission:
         self._plan(p, self.config.hover_speed_m_s)
         self._yaw_goal = float(yaw_rad)
         return True, 'setpoint accepted'
+
+    def _at_wall(self):
+        """Working at the wall, where abort and land retreat first: a mode near it, but an
+        approach only once within the standoff (RETREAT's goal); farther out, retreating
+        would fly on towards the wall."""
+        if self._mode == Mode.APPROACH:
+            return self._ref_t()[0][2] <= self._standoff_t()[2] + self.config.arrive_tol_m
+        return self._mode in NEAR_WALL or self._mode == Mode.RETREAT
 
     def _outside_fence(self, p_map):
         """Why ``p_map`` is outside the geofence (mission.fence_*), or ''."""
