@@ -42,7 +42,8 @@ def run(args):
     from uav_tilt_tools.report_plots import write_plots   # matplotlib only when plotting
     notes = []
     try:
-        rec = recording.load_recording(args.run_dir, notes=notes)
+        path = recording.recording_file(args.run_dir)
+        rec = recording.load_recording(path, notes=notes)
     except recording.RecordingError as err:
         print(f'uav-tilt report: {err}', file=sys.stderr)
         return 2
@@ -50,7 +51,7 @@ def run(args):
         print(f'uav-tilt report: {note}', file=sys.stderr)
     tool_tip_x_m = VehicleParams().tool_tip_x_m
     summary = summarize(rec, tool_tip_x_m)
-    folder = os.path.dirname(recording.recording_file(args.run_dir)) or '.'
+    folder = os.path.dirname(path) or '.'
     with open(os.path.join(folder, 'summary.json'), 'w', encoding='utf-8') as stream:
         json.dump(summary, stream, indent=2)
     write_plots(rec, folder, tool_tip_x_m)
