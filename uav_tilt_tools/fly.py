@@ -42,7 +42,7 @@ def default_duration_s(plan):
 def fly(scenario, target_source='vision', overrides=None, duration_s=None, model_path='',
         threads=0, record=None):
     """Fly the inspection mission of ``scenario`` (the plan in ``overrides['plan_file']``
-    when given) for at most ``duration_s`` (default DURATION_S per task); returns the
+    when given) for at most ``duration_s`` (default :func:`default_duration_s`); returns the
     summary dict.
 
     ``threads``: the detector's (and OpenCV's) thread pool, 0 = the libraries' defaults;
