@@ -142,6 +142,45 @@ def test_a_wall_softer_than_the_campaign_s_is_pushed_into_and_left():
     assert result['success'] and result['poi_error_max_m'] < 0.01, stiffness
 
 
+def test_a_stream_of_setpoints_is_followed_at_its_speed():
+    """Setpoints streamed at a fresh rate (20-50 Hz) along a fresh horizontal direction at a
+    fresh speed under the hover speed, as a teleoperation or an outer planner sends them:
+    the vehicle moves at the stream's speed, lagging the latest setpoint by the
+    reference's 0.6 s of ramp error (trajectory.MinJerk), within the arrival tolerance,
+    and stops on the last one."""
+    rng = np.random.default_rng()
+    config = _config()
+    u = rng.uniform(0.2, 0.7) * config.mission.hover_speed_m_s
+    rate_hz = rng.uniform(20.0, 50.0)
+    heading = rng.uniform(-np.pi, np.pi)
+    direction = np.array([np.cos(heading), np.sin(heading), 0.0])
+    tol_m = config.mission.arrive_tol_m
+    flight = _hovering(config)
+    try:
+        p0 = flight.plant.state().p_map.copy()
+        lags, cross, speeds, t_s = [], [], [], 0.0
+        while t_s < 8.0:
+            goal = p0 + direction * u * t_s
+            assert flight.core.set_setpoint(goal, 0.0)[0]
+            flight.run(1.0 / rate_hz)
+            t_s += 1.0 / rate_hz
+            if t_s > 4.0:
+                state = flight.plant.state()
+                lags.append((goal - state.p_map) @ direction)
+                cross.append(np.linalg.norm(np.cross(state.p_map - p0, direction)))
+                speeds.append(state.v_map @ direction)
+        # measured a period after the setpoint was sent, as the reference moved on
+        lag_m = 0.6 * u - u / rate_hz
+        assert lag_m - tol_m <= min(lags) and max(lags) <= lag_m + tol_m
+        assert max(cross) < tol_m
+        assert np.mean(speeds) == pytest.approx(u, rel=0.1)
+        flight.run(3.0)
+        assert np.linalg.norm(flight.plant.state().p_map - goal) < tol_m
+        assert flight.status['mode'] == 'HOVER'
+    finally:
+        flight.close()
+
+
 def test_nan_setpoint_is_rejected_and_the_vehicle_holds():
     flight = _hovering()
     try:

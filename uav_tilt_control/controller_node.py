@@ -44,6 +44,8 @@ MAX_DT_S = 0.1
 # A quaternion shorter than this is no rotation (all zeros, a default-made message); one
 # longer is normalised.
 MIN_QUATERNION_NORM = 0.5
+# Setpoints are logged at most this often (wall clock), accepted and refused apart.
+SETPOINT_LOG_PERIOD_S = 1.0
 
 
 @dataclasses.dataclass
@@ -233,8 +235,12 @@ class ControllerNode(Node):
         if q is None:
             return
         yaw = Rotation.from_quat(q).as_euler('ZYX')[0]
-        _, message = self.core.set_setpoint(p_map, yaw)
-        self.get_logger().info(f'setpoint {np.round(p_map, 3).tolist()}: {message}')
+        ok, message = self.core.set_setpoint(p_map, yaw)
+        line = f'setpoint {np.round(p_map, 3).tolist()}: {message}'
+        if ok:
+            self.get_logger().info(line, throttle_duration_sec=SETPOINT_LOG_PERIOD_S)
+        else:
+            self.get_logger().warn(line, throttle_duration_sec=SETPOINT_LOG_PERIOD_S)
 
     def _trigger(self, name, method):
         def callback(request, response):

@@ -1245,10 +1245,10 @@ class Mission:
 
     def _to_map(self):
         """Re-express the current reference in map and make map the working frame."""
-        p, v = self._ref_map()
+        p, v, a = self._ref_map()
         self._R_map_t, self._origin_map = np.eye(3), np.zeros(3)
         self._tool_shift_t = np.zeros(3)
-        self._traj = MinJerk(self._now_s, p, p, 1.0, v)
+        self._traj = MinJerk(self._now_s, p, p, 1.0, v, a)
         self._depth_correction_m = 0.0      # now part of the new segment
 
     def _ref_t(self):
@@ -1262,23 +1262,26 @@ class Mission:
         return p, v, a
 
     def _ref_map(self):
-        """(p, v) of the body's reference in map (frame t's reference plus the tool shift)."""
-        p, v = self._ref_t()
-        return self._origin_map + self._R_map_t @ (p + self._tool_shift_t), self._R_map_t @ v
+        """(p, v, a) of the body's reference in map (frame t's reference plus the tool
+        shift)."""
+        p, v, a = self._sample()
+        R = self._R_map_t
+        return self._origin_map + R @ (p + self._tool_shift_t), R @ v, R @ a
 
     def _plan(self, goal_map, v_max):
-        """New segment in map from the current reference (continuous position and speed)."""
+        """New segment in map from the current reference (continuous position, speed and
+        acceleration)."""
         self._to_map()
-        p, v = self._ref_t()
-        self._traj = MinJerk(self._now_s, p, goal_map, v_max, v)
+        p, v, a = self._sample()
+        self._traj = MinJerk(self._now_s, p, goal_map, v_max, v, a)
 
     def _plan_t(self, goal_t, v_max, ref_map=None):
         """New segment in the current target frame from the current reference
-        (``ref_map`` = (p_map, v_map) when the frame has just changed)."""
-        p_map, v_map = ref_map or self._ref_map()
+        (``ref_map`` = (p_map, v_map, a_map) when the frame has just changed)."""
+        p_map, v_map, a_map = ref_map or self._ref_map()
         R, o = self._R_map_t, self._origin_map
         self._traj = MinJerk(self._now_s, frames.to_frame(R, o, p_map) - self._tool_shift_t,
-                             goal_t, v_max, R.T @ v_map)
+                             goal_t, v_max, R.T @ v_map, R.T @ a_map)
         self._depth_correction_m = 0.0      # now part of the new segment
 
     def _arrived(self):

@@ -31,24 +31,34 @@ BRAKE_REACH = 16.0 / 81.0
 
 
 class MinJerk:
-    """Minimum jerk from (p0, v0, a=0) to (p1, v=0, a=0) with peak speed about v_max: the
-    rest-to-rest quintic from p0 to p1, plus one that brings v0 to rest within about
-    BRAKE_ACCEL_M_S2 and ends where it began."""
+    """Minimum jerk from (p0, v0, a0) to (p1, v=0, a=0) with peak speed about v_max.
 
-    def __init__(self, t0_s, p0, p1, v_max, v0=np.zeros(3)):
+    The part of v0 along p1 - p0 carries on: with it the segment is the quintic from
+    (p0, v0) to p1 over the whole of T, which reaches p1 without overshoot and never
+    exceeds v_max while that part is at most MIN_JERK_PEAK |p1 - p0| / T (any more of it
+    is braked like the rest). The rest of v0, and a0, are brought to rest within about
+    BRAKE_ACCEL_M_S2 by a quintic that ends where it began. So a goal that moves on ahead
+    of the reference (a stream of setpoints) is followed at its speed, a ramp lagging
+    0.6 MIN_SEGMENT_S behind it at any rate of setpoints, instead of being braked for at
+    every new one."""
+
+    def __init__(self, t0_s, p0, p1, v_max, v0=np.zeros(3), a0=np.zeros(3)):
         self.t0_s = t0_s
         self.p1 = np.asarray(p1, dtype=float).copy()
+        v0 = np.asarray(v0, dtype=float)
         d = self.p1 - p0
-        self.T = max(MIN_JERK_PEAK * np.linalg.norm(d) / v_max, MIN_SEGMENT_S)
+        distance_m = np.linalg.norm(d)
+        self.T = max(MIN_JERK_PEAK * distance_m / v_max, MIN_SEGMENT_S)
         T = self.T
-        self.T_brake = min(max(BRAKE_PEAK * np.linalg.norm(v0) / BRAKE_ACCEL_M_S2,
+        along = d / distance_m if distance_m > 0.0 else np.zeros(3)
+        v_keep = along * float(np.clip(v0 @ along, 0.0, MIN_JERK_PEAK * distance_m / T))
+        v_brake = v0 - v_keep
+        self.T_brake = min(max(BRAKE_PEAK * np.linalg.norm(v_brake) / BRAKE_ACCEL_M_S2,
                                MIN_SEGMENT_S), T)
-        Tb = self.T_brake
         zero = np.zeros(3)
         self._c = np.array([p0, zero, zero, 10 * d / T ** 3, -15 * d / T ** 4,
-                            6 * d / T ** 5], dtype=float)
-        self._brake = np.array([zero, v0, zero, -6 * v0 / Tb ** 2, 8 * v0 / Tb ** 3,
-                                -3 * v0 / Tb ** 4], dtype=float)
+                            6 * d / T ** 5], dtype=float) + _brake_quintic(v_keep, T)
+        self._brake = _brake_quintic(v_brake, self.T_brake, np.asarray(a0, dtype=float))
 
     def done(self, t_s):
         """True once the segment has reached p1."""
@@ -65,6 +75,13 @@ class MinJerk:
             pva += rows @ self._brake
         p, v, a = pva
         return p, v, a
+
+
+def _brake_quintic(v0, T, a0=np.zeros(3)):
+    """Coefficients of the quintic from (0, v0, a0) back to (0, 0, 0) over T."""
+    return np.array([np.zeros(3), v0, a0 / 2, -6 * v0 / T ** 2 - 1.5 * a0 / T,
+                     8 * v0 / T ** 3 + 1.5 * a0 / T ** 2, -3 * v0 / T ** 4 - 0.5 * a0 / T ** 3],
+                    dtype=float)
 
 
 def _quintic_rows(t):
