@@ -3,7 +3,8 @@ import dataclasses
 
 import pytest
 
-from uav_tilt_common.config import ConfigError, from_dict, nested, param, to_flat
+from uav_tilt_common.config import (ConfigError, from_dict, load_yaml, nested, param,
+                                    read_yaml, to_flat)
 
 
 @dataclasses.dataclass
@@ -56,3 +57,16 @@ def test_bad_values_raise_one_clear_line(data, words):
 def test_a_group_left_empty_takes_its_defaults():
     # YAML `inner:` with nothing under it
     assert from_dict(Outer, {'inner': None}) == Outer()
+
+
+def test_a_key_given_twice_in_a_file_is_refused_with_both_lines(tmp_path):
+    path = tmp_path / 'twice.yaml'
+    path.write_text('mode: realtime\ninner:\n  gain: 2.0\n  xyz: [0, 0, 0]\n  gain: 9.0\n')
+    with pytest.raises(ConfigError) as err:
+        load_yaml(Outer, path, 'params_file')
+    text = str(err.value)
+    assert '\n' not in text and "'params_file'" in text
+    assert "key 'gain' a second time" in text and 'line 3' in text and 'line 5' in text
+    # YAML's merge key still overrides what it merges
+    path.write_text('base: &b {gain: 1.0, count: 2}\nother:\n  <<: *b\n  gain: 3.0\n')
+    assert read_yaml(path)['other'] == {'gain': 3.0, 'count': 2}

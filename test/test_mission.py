@@ -913,6 +913,18 @@ def test_abort_in_search_hovers_and_land_lands():
     assert not flight.mission.status['success']
 
 
+@pytest.mark.parametrize('mode', [Mode.TAKEOFF, Mode.APPROACH, Mode.HOLD])
+def test_inspect_while_the_plan_runs_says_so_and_changes_nothing(mode):
+    flight = _in_mode(mode)
+    records = flight.mission.status['task_outcomes']
+    ok, why = flight.mission.inspect()
+    assert not ok and 'already under way' in why and mode.value in why, why
+    assert ('taking off' if mode == Mode.TAKEOFF else 'task 1 of 1') in why, why
+    assert flight.mission.mode == mode and flight.mission.status['task_outcomes'] == records
+    flight.run_to(Mode.IDLE, timeout_s=150.0)
+    assert flight.mission.status['success']
+
+
 def test_services_refused_in_wrong_modes():
     mission = Mission(VEHICLE)
     ok, why = mission.takeoff()

@@ -12,6 +12,7 @@ from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
 
 from ros_graph import start, stop
 from uav_tilt_common import names, ros_msgs, ros_qos
+from uav_tilt_sim.plant_node import KEEP_UP_SHARE, realtime_reason
 
 TIMEOUT_S = 0.3
 # Realtime test pace: slow enough that rendering 30 Hz keeps up on a busy 2-core machine.
@@ -206,3 +207,15 @@ def test_realtime_plant_that_cannot_keep_up_says_so(tmp_path, probe):
     timing = json.loads(summary.read_text())
     assert timing['mode'] == 'realtime' and timing['late_commands'] == 5
     assert timing['dropped_ticks'] > 0 and 0.0 < timing['rtf'] < 40.0
+
+
+def test_the_realtime_warning_names_only_what_went_wrong():
+    """A window that kept the target pace but had late commands blames the commands, not
+    the simulation's speed; one that fell behind says by how much."""
+    assert realtime_reason(1.0, 1.0, 0, 0, 5.0) == ''
+    assert realtime_reason(KEEP_UP_SHARE, 1.0, 0, 0, 5.0) == ''
+    late = realtime_reason(1.0, 1.0, 3, 0, 5.0)
+    assert late == '3 commands came after the next tick had started in the last 5 s'
+    slow = realtime_reason(0.5, 1.0, 0, 12, 5.0)
+    assert 'not keeping up with the wall clock: sim time at 0.50x (target 1x)' in slow
+    assert '12 ticks dropped' in slow and 'commands' not in slow

@@ -210,12 +210,35 @@ def load_yaml(cls: type[ConfigT], path: str | os.PathLike[str],
     return from_dict(cls, data)
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (it would keep the
+    last silently: a value written twice is a mistake the file's author wants to hear of)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> Any:
+        seen = set()
+        for key_node, _ in node.value:
+            if key_node.tag == 'tag:yaml.org,2002:merge':   # '<<': merged keys may be redone
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                duplicate = key in seen
+            except TypeError:       # unhashable: the base class says so
+                continue
+            if duplicate:
+                raise yaml.constructor.ConstructorError(
+                    'while reading a mapping', node.start_mark,
+                    f'found the key {key!r} a second time', key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
 def read_yaml(path: str | os.PathLike[str]) -> Any:
     """The data of YAML file ``path`` (None when empty); a file that cannot be read,
-    decoded as UTF-8 or parsed is a ConfigError of one line saying why."""
+    decoded as UTF-8 or parsed, or that gives a key twice, is a ConfigError of one line
+    saying why."""
     try:
         with open(path, encoding='utf-8') as stream:
-            return yaml.safe_load(stream)
+            return yaml.load(stream, Loader=_UniqueKeyLoader)
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
         raise ConfigError(' '.join(str(err).split())) from None
 

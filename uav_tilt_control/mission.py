@@ -441,6 +441,11 @@ class Mission:
             self._start_plan()
             self._start_task(0)
             return True, f'starting the plan ({len(self.plan)} tasks)'
+        if self._inspect_pending or self._plan_running():
+            where = (f'task {self._task_index + 1} of {len(self.plan)}'
+                     if self._task_index >= 0 else 'taking off first')
+            return False, (f'the plan is already under way ({where}, {self._mode.value}); '
+                           f'abort stops it')
         ok, why = self._can_arm()
         if not ok:
             return False, why

@@ -367,12 +367,9 @@ class PlantNode(Node):
         rtf = (self.plant.t_s - sim) / (now - wall)
         new_late = self.stats['late_commands'] - late
         new_dropped = self.stats['dropped_ticks'] - dropped
-        if rtf >= KEEP_UP_SHARE * target and not new_late and not new_dropped:
-            return ''
-        reason = (f'not keeping up with the wall clock: sim time at {rtf:.2f}x '
-                  f'(target {target:g}x), {new_late} late commands and {new_dropped} dropped '
-                  f'ticks in the last {now - wall:.0f} s')
-        self.get_logger().warn(reason)
+        reason = realtime_reason(rtf, target, new_late, new_dropped, now - wall)
+        if reason:
+            self.get_logger().warn(reason)
         return reason
 
     def summary(self):
@@ -390,6 +387,19 @@ class PlantNode(Node):
                 stream.write(json.dumps(self.summary()) + '\n')
         self.plant.close()
         return super().destroy_node()
+
+
+def realtime_reason(rtf, target_rtf, late_commands, dropped_ticks, window_s):
+    """What went wrong with real time over a window: '' when nothing did."""
+    parts = []
+    if rtf < KEEP_UP_SHARE * target_rtf:
+        parts.append(f'not keeping up with the wall clock: sim time at {rtf:.2f}x '
+                     f'(target {target_rtf:g}x)')
+    if dropped_ticks:
+        parts.append(f'{dropped_ticks} ticks dropped')
+    if late_commands:
+        parts.append(f'{late_commands} commands came after the next tick had started')
+    return '; '.join(parts) + f' in the last {window_s:.0f} s' if parts else ''
 
 
 def main(args=None):
