@@ -60,8 +60,10 @@ def start_graph(tmp_path, probe, *args):
     once the controller answers the plant's ticks."""
     log_path = tmp_path / 'launch.log'
     with open(log_path, 'w') as log:
+        # its temporary files in the test's folder: a launch killed by SIGKILL leaves them
         launch = subprocess.Popen([LAUNCH, '--no-vision', *args], cwd=tmp_path, stdout=log,
-                                  stderr=subprocess.STDOUT)
+                                  stderr=subprocess.STDOUT,
+                                  env=dict(os.environ, TMPDIR=str(tmp_path)))
     probe.record(names.CONTROLLER_STATUS, DiagnosticArray, ros_qos.STATUS)
 
     def ticking():
