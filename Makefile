@@ -16,7 +16,7 @@ $(STAMP): requirements.txt setup.py
 	touch $(STAMP)
 
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider test
+	$(PY) -m pytest -q -p no:cacheprovider --durations=15 test
 
 PACKAGES := uav_tilt_common uav_tilt_sim uav_tilt_control uav_tilt_vision uav_tilt_tools
 
