@@ -62,6 +62,15 @@ def test_bad_options_stop_with_one_clear_error():
     assert env.cfg.controller.contact_force == force_n
     with pytest.raises(ValueError, match='contact_force'):
         gym_env.ContactInspectionEnv(controller=ControllerConfig(contact_force=-force_n))
+    # the target source is the environment's option: given to the controller it would be
+    # overwritten without a word
+    for options in ({'controller': {'target_source': 'vision'}},
+                    {'controller.target_source': 'vision'}):
+        with pytest.raises(ValueError, match="'controller.target_source'.*'target_source'"):
+            gym_env.ContactInspectionEnv(**options)
+    # a detector that is not there is found at make, not deep in the first reset
+    with pytest.raises(ValueError, match="'model_path'.*no such file"):
+        gym_env.ContactInspectionEnv(target_source='vision', model_path='no/such/model.onnx')
 
 
 def test_a_takeoff_episode_counts_its_time_from_the_wall_and_refuses_bad_input():
@@ -71,9 +80,11 @@ def test_a_takeoff_episode_counts_its_time_from_the_wall_and_refuses_bad_input()
         with pytest.raises(ValueError, match='options'):
             env.reset(seed=5, options={'start': 'wall'})
         env.reset(seed=int(np.random.default_rng().integers(0, 2**31 - 1)))
-        for bad in ([np.nan, 0.0, 0.0], [0.0, np.inf, 0.0], [0.0, 0.0]):
+        for bad in (np.float32([np.nan, 0.0, 0.0]), np.float32([0.0, np.inf, 0.0]),
+                    np.float32([0.0, 0.0]), np.zeros((1, 3)), ['1', '0', '0'],
+                    [True, False, True], None):
             with pytest.raises(ValueError, match='action'):
-                env.step(np.array(bad, dtype=np.float32))
+                env.step(bad)
         arrived = None
         for _ in range(5000):       # the flight in takes tens of seconds: 30 steps each
             _, _, terminated, truncated, info = env.step(np.zeros(3, dtype=np.float32))
@@ -85,6 +96,8 @@ def test_a_takeoff_episode_counts_its_time_from_the_wall_and_refuses_bad_input()
         assert truncated and not terminated and arrived is not None, info
         assert info['outcome'] == 'time_limit'
         assert info['t_s'] - arrived == pytest.approx(1.0, abs=0.1), (arrived, info)
+        with pytest.raises(gym.error.ResetNeeded, match='ended'):
+            env.step(np.zeros(3, dtype=np.float32))
     finally:
         env.close()
 

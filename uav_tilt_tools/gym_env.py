@@ -38,7 +38,8 @@ z off the surface); ``wrench`` (6,) the F/T reading (ee_link, N and N m); ``push
 touch (with CONTACT's ``align`` pauses), press, hold, other); with ``camera=True`` also
 ``image`` (H, W, 3) uint8, the eye-in-hand camera at the end of the step.
 ``render_mode='rgb_array'`` renders that camera. An action that is not three finite
-numbers is a ValueError (one beyond [-1, 1] is clipped).
+numbers (an array of shape (3,), integer or float) is a ValueError (one beyond [-1, 1] is
+clipped); a step after the episode ended is gymnasium's ResetNeeded.
 
 **Reward** (from the simulator's truth): each control tick in HOLD earns
 :func:`touch_reward` = 1 - ((push - F_d) / force_scale_n)^2 - poi_error / poi_scale_m
@@ -49,11 +50,12 @@ episode's return is (HOLD ticks / ticks per step) times one minus
 the mission's (force_rms_error_n / force_scale_n)^2 and poi_error_m / poi_scale_m.
 
 **Termination**: the hold completed (every task of the plan ended; the one touch: its
-hold), not the retreat and landing after it: success when it met the inspection bar by the truth
-(:func:`uav_tilt_tools.task_metrics.missed_bar`), else a failure, ``off_target`` or
-``force_off_setpoint``; a failsafe of the mission (force limit, no
-contact, target lost, stale odometry, upset), the contact lost in HOLD, a push above the force
-limit, the vehicle below ``ground_clearance_m`` near the wall or tilted past
+hold), not the retreat and landing after it (the last step is the tick the hold ends on,
+when the mission has begun its RETREAT: its phase is ``other``): success when it met the
+inspection bar by the truth (:func:`uav_tilt_tools.task_metrics.missed_bar`), else a
+failure, ``off_target`` or ``force_off_setpoint``; a failsafe of the mission (force limit,
+no contact, target lost, stale odometry, upset), the contact lost in HOLD, a push above the
+force limit, the vehicle below ``ground_clearance_m`` near the wall or tilted past
 ``max_tilt_deg``: each a failure, rewarded ``-failure_penalty``. Truncation after
 ``episode_s`` of simulated time at the wall (from the episode's start; with
 ``start='takeoff'`` from the mission's arrival at the wall, and before it after
@@ -69,6 +71,7 @@ from gymnasium import spaces
 
 from uav_tilt_common.config import ConfigError, from_dict, nested, param, to_flat
 from uav_tilt_common.geometry import quat_to_matrix
+from uav_tilt_common.resources import resolve
 from uav_tilt_control.controller_core import TARGET_SOURCES, ControllerConfig
 from uav_tilt_common.modes import Mode
 from uav_tilt_control.mission import NEAR_WALL
@@ -103,6 +106,7 @@ class ContactEnvConfig:
     ground_clearance_m: float = param(0.2, lo=0.0, hi=10.0)
     max_tilt_deg: float = param(60.0, lo=1.0, hi=180.0)
     # the controller's parameters (uav-tilt fly --set names); its target_source is the above
+    # (given here too, it is refused)
     controller: ControllerConfig = nested(ControllerConfig)
 
 
@@ -126,8 +130,15 @@ class ContactInspectionEnv(gym.Env):
             raise ConfigError(f'render_mode {render_mode!r}: expected one of '
                               f'{self.metadata["render_modes"]} or None')
         self.render_mode = render_mode
+        given = options.get('controller')
+        if 'controller.target_source' in options or (
+                isinstance(given, dict) and 'target_source' in given):
+            raise ConfigError("parameter 'controller.target_source': the environment's own "
+                              "'target_source' option sets it")
         self.cfg = cfg = from_dict(ContactEnvConfig, options)
         cfg.controller.target_source = cfg.target_source
+        if cfg.model_path:
+            resolve(cfg.model_path, 'model_path')
         self.plant_config = PlantCoreConfig()
         control_hz = self.plant_config.control_hz
         self.ticks_per_step = max(1, int(round(control_hz / cfg.action_rate_hz)))
@@ -152,6 +163,7 @@ class ContactInspectionEnv(gym.Env):
         self._setpoint = None
         self._frame = None          # (tick, rgb) of the last rendered image
         self._info = {}
+        self._ended = False         # the episode terminated or was truncated
 
     # --- gymnasium API --------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -170,6 +182,7 @@ class ContactInspectionEnv(gym.Env):
                                f'(last world seed {world_seed})')
         # the time at the wall counts from here; with start='takeoff' from the arrival
         self._t0_s = self.flight.t_s if cfg.start == 'wall' else None
+        self._ended = False
         self._info = dict(world_seed=world_seed, redraws=redraws, flight_in_s=self.flight.t_s)
         return self._observation(), self._step_info()
 
@@ -177,10 +190,13 @@ class ContactInspectionEnv(gym.Env):
         """Hold the setpoint offset of ``action`` over the ticks of one step."""
         if self.flight is None:
             raise gym.error.ResetNeeded('step() before reset() (or after close())')
-        try:
-            a = np.asarray(action, dtype=float).reshape(3)
-        except (TypeError, ValueError):
-            raise ValueError(f'action {action!r}: expected 3 numbers in [-1, 1]') from None
+        if self._ended:
+            raise gym.error.ResetNeeded('step() after the episode ended: call reset()')
+        a = np.asarray(action)
+        if a.shape != (3,) or not (np.issubdtype(a.dtype, np.integer)
+                                   or np.issubdtype(a.dtype, np.floating)):
+            raise ValueError(f'action {action!r}: expected 3 numbers in [-1, 1]')
+        a = a.astype(float)
         if not np.all(np.isfinite(a)):
             raise ValueError(f'action {a.tolist()} is not finite')
         a = np.clip(a, -1.0, 1.0)
@@ -207,6 +223,7 @@ class ContactInspectionEnv(gym.Env):
         info = self._step_info()
         if terminated or truncated:
             info['outcome'] = outcome or 'time_limit'
+            self._ended = True
         return self._observation(), float(reward), terminated, truncated, info
 
     def render(self):

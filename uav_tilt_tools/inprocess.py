@@ -220,7 +220,7 @@ def camera_vision(plant_config, model_path='', backend='auto', vision_config=Non
     node's: the working directory, then the package's files; '' the deployed detector) and
     the plant's camera; ``threads`` (0: the libraries' defaults) sizes the detector's thread
     pool and OpenCV's (process-wide), e.g. to the one CPU a campaign run gets."""
-    from uav_tilt_common.resources import locate
+    from uav_tilt_common.resources import resolve
     from uav_tilt_vision.backends import DEPLOYED_MODEL, load_detector
     from uav_tilt_vision.pipeline import VisionPipeline
     from uav_tilt_vision.target_pose import CameraIntrinsics
@@ -229,6 +229,7 @@ def camera_vision(plant_config, model_path='', backend='auto', vision_config=Non
         cv2.setNumThreads(threads)
     cam = plant_config.camera
     intrinsics = CameraIntrinsics(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height)
-    detector = load_detector(locate(model_path or DEPLOYED_MODEL), backend, threads)
+    detector = load_detector(resolve(model_path or DEPLOYED_MODEL, 'model_path'), backend,
+                             threads)
     pipeline = VisionPipeline(detector, intrinsics, vision_config)
     return CameraVision(pipeline, cam.rate_hz, plant_config.control_hz)
