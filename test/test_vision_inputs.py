@@ -198,6 +198,14 @@ def test_train_refuses_a_crop_larger_than_the_input(data, tmp_path, capsys):
             'crop')
 
 
+def test_compress_refuses_a_crop_larger_than_the_input_before_it_prunes(tiny, data, tmp_path,
+                                                                        capsys):
+    out = tmp_path / 'out'
+    refused(capsys, ['compress', '--model', tiny, '--data', data, '--out-dir', out,
+                     '--crop', '640', '640'], 'crop')
+    assert not out.exists()
+
+
 def test_growing_to_the_scales_a_model_has_is_refused(data, tmp_path, capsys):
     refused(capsys, ['train', '--data', data, '--out', tmp_path / 'm.pt', '--init', FP32,
                      '--grow-scales', '3'], 'scales')

@@ -31,7 +31,7 @@ import torch
 from uav_tilt_common.config import ConfigError
 from uav_tilt_vision.detector import Detector, input_batch, load_model
 from uav_tilt_vision.profile import profile_model
-from uav_tilt_vision.train import card_path, evaluate, git_commit, train
+from uav_tilt_vision.train import card_path, check_crop, evaluate, git_commit, train
 from uav_tilt_vision.yolo_data import YoloDataset
 
 ONNX_OPSET = 17
@@ -157,9 +157,10 @@ def compress(model_path: str | os.PathLike[str], data_dir: str | os.PathLike[str
     ``bf16``, ``device``, ``workers``: the fine-tuning's (see ``train.train``).
     ``log``: receives the fine-tuning's per-epoch lines.
     """
+    model = load_model(model_path)
+    check_crop(crop, model.img_size)        # before the evaluation and the pruning
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    model = load_model(model_path)
     report = {'fp32': {**size_stats(model), 'path': str(model_path)}}
     if eval_dir:
         report['fp32'].update(evaluate(model, eval_dir))

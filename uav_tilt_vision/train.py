@@ -77,6 +77,12 @@ def num_classes_of(dataset: YoloDataset, meta: dict[str, Any]) -> int:
     return int(labels.max()) + 1 if len(labels) else 1
 
 
+def check_crop(crop: Sequence[int] | None, img_size: Sequence[int]) -> None:
+    """ConfigError unless training window ``crop`` (w, h; None: none) fits the input."""
+    if crop and not all(0 < c <= s for c, s in zip(crop, img_size)):
+        raise ConfigError(f'crop {list(crop)} must fit the {list(img_size)} input')
+
+
 def train(data_dir: str | os.PathLike[str], out_path: str | os.PathLike[str], epochs: int = 50,
           seed: int = 0, width_mult: float = 0.25, img_size: Sequence[int] = IMG_SIZE,
           batch: int = 16, device: str = 'auto', lr: float = 3e-3, weight_decay: float = 5e-4,
@@ -114,8 +120,7 @@ def train(data_dir: str | os.PathLike[str], out_path: str | os.PathLike[str], ep
     torch.backends.cudnn.benchmark = False
     if model is not None:
         img_size = model.img_size
-    if crop and not all(0 < c <= s for c, s in zip(crop, img_size)):
-        raise ConfigError(f'crop {list(crop)} must fit the {list(img_size)} input')
+    check_crop(crop, img_size)
     ds = YoloDataset(data_dir, img_size, augment=augment, hflip=hflip, seed=seed,
                      crop=crop if augment else None, hsv=tuple(hsv))
     meta = read_meta(data_dir)
