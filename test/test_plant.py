@@ -1,4 +1,7 @@
 """The PyBullet plant: hover, the article's decoupling, contact sensing, determinism."""
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -196,3 +199,12 @@ def test_the_force_torque_sensor_reads_friction_with_its_sign(tmp_path, on):
             assert np.median(ratio) == pytest.approx(0.4, rel=0.03)
     finally:
         flight.close()
+
+
+def test_importing_the_simulator_prints_nothing():
+    """pybullet's C module prints its build time on stderr at import: every command would
+    start with that line above its own one-line errors (uav_tilt_sim.bullet hides it)."""
+    out = subprocess.run([sys.executable, '-c',
+                          'import uav_tilt_sim.plant, uav_tilt_vision.dataset'],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout == '' and out.stderr == '', out

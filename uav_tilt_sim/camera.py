@@ -10,10 +10,10 @@ import sys
 from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
-import pybullet as p
 from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.config import param
+from uav_tilt_sim.bullet import pybullet as p
 
 if TYPE_CHECKING:
     from uav_tilt_sim.gl_renderer import GlRenderer

@@ -11,10 +11,10 @@ import os
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pybullet as p
 from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.geometry import quat_to_matrix
+from uav_tilt_sim.bullet import pybullet as p
 
 if TYPE_CHECKING:
     from uav_tilt_sim.camera import CameraConfig, Frame, Lighting

@@ -7,7 +7,6 @@ import dataclasses
 import math
 
 import numpy as np
-import pybullet as p
 
 from uav_tilt_common.config import nested, param
 from uav_tilt_common.geometry import cross3, quat_to_matrix, rotor_wrench_matrix
@@ -17,6 +16,7 @@ from uav_tilt_common.vehicle import GRAVITY, VehicleParams
 from uav_tilt_sim import camera as cam_mod
 from uav_tilt_sim import vehicle_body
 from uav_tilt_sim.actuators import RotorBank, Servo
+from uav_tilt_sim.bullet import pybullet as p
 from uav_tilt_sim.sensors import SensorModel
 from uav_tilt_sim.visuals import Scene
 from uav_tilt_sim.world import build_world

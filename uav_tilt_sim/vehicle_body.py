@@ -7,11 +7,11 @@ centroid, so equal thrusts hover without torque.
 import dataclasses
 
 import numpy as np
-import pybullet as p
 from numpy.typing import NDArray
 
 from uav_tilt_common.geometry import Vector
 from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_sim.bullet import pybullet as p
 from uav_tilt_sim.visuals import BOX, CYLINDER, SPHERE, Scene, Visual, pybullet_shape
 
 ARM_FRONT, ARM_REAR, TOOL = 0, 1, 2     # link indices = joint indices

@@ -13,9 +13,9 @@ from typing import Any, Iterable, Sequence
 
 import cv2
 import numpy as np
-import pybullet as p
 
 from uav_tilt_common.geometry import Vector
+from uav_tilt_sim.bullet import pybullet as p
 
 QUAD, BOX, CYLINDER, SPHERE = 'quad', 'box', 'cylinder', 'sphere'
 # Tessellation of round shapes for the GL renderer (TinyRenderer tessellates its own).

@@ -2,11 +2,11 @@
 import dataclasses
 
 import numpy as np
-import pybullet as p
 from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_sim import textures
+from uav_tilt_sim.bullet import pybullet as p
 from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
 from uav_tilt_sim.visuals import QUAD, Scene, Visual, create_static_body
 

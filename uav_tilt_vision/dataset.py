@@ -29,7 +29,6 @@ from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
 import cv2
 import numpy as np
-import pybullet as p
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
@@ -37,6 +36,7 @@ from uav_tilt_common.config import ConfigError
 from uav_tilt_common.pose import Pose
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim import textures
+from uav_tilt_sim.bullet import pybullet as p
 from uav_tilt_sim.camera import CameraConfig, Lighting, make_renderer
 from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
 from uav_tilt_sim.vehicle_body import create_vehicle
