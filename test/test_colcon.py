@@ -162,8 +162,7 @@ def test_the_installed_graph_flies_the_ground_truth_mission(workspace, probe, tm
         assert probe.spin_until(
             lambda: probe.node.count_publishers(names.CONTROLLER_STATUS) > 0, 60.0)
         plant = start_installed(workspace, 'plant_node', log_path=tmp_path / 'plant.log',
-                                params={'camera_enabled': 'false',
-                                        'lockstep_timeout_s': 5.0})
+                                params={'camera_enabled': 'false'})
         done = probe.spin_until(lambda: 'TAKEOFF' in modes and modes[-1] == 'IDLE', 240.0)
         logs = [p.read_text()[-2000:] for p in (tmp_path / 'plant.log',
                                                 tmp_path / 'controller.log')]

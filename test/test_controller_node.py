@@ -1,4 +1,6 @@
 """controller_node with plant_node in lockstep: the whole inspection mission through ROS."""
+import signal
+
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
@@ -11,6 +13,8 @@ MISSION_MODES = ['IDLE', 'TAKEOFF', 'HOVER', 'SEARCH', 'APPROACH', 'CONTACT', 'H
                  'RETREAT', 'LAND', 'IDLE']
 # Status comes at 10 Hz: SEARCH lasts one tick with a ground-truth target and may be missed.
 MUST_SEE = ['TAKEOFF', 'CONTACT', 'HOLD', 'RETREAT', 'LAND']
+# How long a controller process is stopped (SIGSTOP) mid-flight.
+STALL_S = 3.0
 
 
 @pytest.fixture
@@ -79,4 +83,38 @@ def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
     assert int(final['rejected_frame']) == 1
     assert int(final['rejected_quaternion']) == 1 and int(final['rejected_stamp']) == 1
     assert float(final['loop_rate_hz']) > 0.0
+    assert code_c == 0 and code_p == 0
+
+
+def test_a_stalled_controller_only_pauses_lockstep(tmp_path, probe):
+    """A controller starved of CPU for seconds (a loaded machine) is no lost controller: in
+    lockstep simulated time waits for it, with no failsafe and no gap in the flight."""
+    plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
+                  params={'camera_enabled': 'false', 'status_rate_hz': 10.0})
+    controller = start('uav_tilt_control.controller_node', log_path=tmp_path / 'controller.log',
+                       params={'target_source': 'ground_truth', 'autostart': 'inspect'})
+    modes = []
+    probe.node.create_subscription(
+        DiagnosticArray, names.CONTROLLER_STATUS,
+        lambda msg: modes.append(status_values(msg)['mode']), ros_qos.STATUS)
+    probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
+
+    def sim_time_s():
+        return float(probe.latest_status(names.PLANT_STATUS)['sim_time_s'])
+    try:
+        assert probe.spin_until(lambda: 'HOVER' in modes or 'SEARCH' in modes, 120.0), modes
+        # longer than a careless timeout (the default was 0.5 s), shorter than a dead node's
+        controller.send_signal(signal.SIGSTOP)
+        probe.spin_until(lambda: False, 0.5)          # commands in flight land
+        paused_at_s = sim_time_s()
+        probe.spin_until(lambda: False, STALL_S)
+        assert sim_time_s() == pytest.approx(paused_at_s, abs=2.0 / 300.0)
+        controller.send_signal(signal.SIGCONT)
+        assert probe.spin_until(lambda: sim_time_s() > paused_at_s + 1.0, 60.0)
+        status = probe.latest_status(names.PLANT_STATUS)
+        assert int(status['lockstep_timeouts']) == 0, status
+    finally:
+        controller.send_signal(signal.SIGCONT)
+        code_c, _ = stop(controller)
+        code_p, _ = stop(plant)
     assert code_c == 0 and code_p == 0

@@ -18,7 +18,7 @@ TIMEOUT_S = 600
 # On a shared 2-core machine a node can be starved of CPU for more than the plant's default
 # 0.5 s lockstep timeout without being gone (a stall mid-slide then shows as a force
 # transient); the timeout failsafe is not under test here. The ground truth needs no camera.
-PLANT = ('--param', 'plant.lockstep_timeout_s:=5.0', '--param', 'plant.camera_enabled:=false')
+PLANT = ('--param', 'plant.camera_enabled:=false')
 
 
 def test_the_plan_through_the_node_graph_succeeds_and_is_reported(tmp_path):

@@ -12,7 +12,7 @@ from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
 
 from ros_graph import start, stop
 from uav_tilt_common import names, ros_msgs, ros_qos
-from uav_tilt_sim.plant_node import KEEP_UP_SHARE, realtime_reason
+from uav_tilt_sim.plant_node import KEEP_UP_SHARE, RESEND_PERIOD_S, realtime_reason
 
 TIMEOUT_S = 0.3
 # Realtime test pace: slow enough that rendering 30 Hz keeps up on a busy 2-core machine.
@@ -110,6 +110,37 @@ def test_driver_answers_a_re_sent_tick_again(tmp_path, probe):
         stop(driver)
 
 
+def test_a_tick_whose_answer_is_lost_is_sent_again(tmp_path, probe):
+    """Lockstep with a driver here that drops its answer to one tick: the plant sends that
+    tick again within RESEND_PERIOD_S or so, takes the answer to it and goes on, with no
+    failsafe (DDS would repair a lost message only at a heartbeat, seconds later)."""
+    plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
+                  params={'camera_enabled': 'false', 'status_rate_hz': 10.0})
+    pub = probe.node.create_publisher(JointState, names.ACTUATORS_CMD, ros_qos.CONTROL)
+    drop_ns = round(1e9 * 150 / 300)            # the answer to tick 150
+    heard = []                                  # (stamp ns, wall time)
+
+    def answer(imu):
+        stamp_ns = ros_msgs.stamp_ns(imu.header.stamp)
+        heard.append((stamp_ns, time.monotonic()))
+        if stamp_ns != drop_ns or [s for s, _ in heard].count(stamp_ns) > 1:
+            pub.publish(ros_msgs.actuator_msg([0.0] * 4, (0.0, 0.0), imu.header.stamp))
+    probe.node.create_subscription(Imu, names.IMU, answer, ros_qos.CONTROL)
+    probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
+    try:
+        assert probe.spin_until(lambda: any(s > drop_ns + 10**9 for s, _ in heard), 120.0), \
+            (tmp_path / 'plant.log').read_text()
+        probe.spin_until(lambda: False, 0.3)     # a status after it
+    finally:
+        code, _ = stop(plant)
+    dropped = [t for s, t in heard if s == drop_ns]
+    assert len(dropped) >= 2
+    assert dropped[1] - dropped[0] < RESEND_PERIOD_S + 0.5
+    status = latest_status(probe)
+    assert int(status['lockstep_timeouts']) == 0 and int(status['resent_ticks']) >= 1, status
+    assert code == 0
+
+
 def test_bad_parameter_stops_the_node_with_one_clear_line(tmp_path):
     plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
                   params={'rtf': -2.0})
@@ -119,6 +150,7 @@ def test_bad_parameter_stops_the_node_with_one_clear_line(tmp_path):
     assert len(lines) == 1 and "'rtf'" in lines[0] and '-2.0' in lines[0]
 
 
+@pytest.mark.alone
 def test_realtime_mode_follows_the_wall_clock_and_streams_the_camera(tmp_path, probe):
     plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
                   params={'mode': 'realtime', 'rtf': RTF, 'status_rate_hz': 10.0})
@@ -173,6 +205,7 @@ def test_realtime_mode_follows_the_wall_clock_and_streams_the_camera(tmp_path, p
     assert code == 0
 
 
+@pytest.mark.alone
 def test_realtime_plant_that_cannot_keep_up_says_so(tmp_path, probe):
     """Asked for 40x the wall clock with the camera on, no host keeps up: sim time slips,
     the dropped ticks and the achieved factor are reported, a warning is logged, and the

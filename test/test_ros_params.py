@@ -11,11 +11,13 @@ import time
 
 import pytest
 import rclpy
+import yaml
 from rclpy.parameter import Parameter
 
 from ros_graph import REPO, alive
 from uav_tilt_common.config import ConfigError, fields_flat, param, unit_of
-from uav_tilt_common.ros_params import STOP_SIGNALS, declare_config, note_stop_signals
+from uav_tilt_common.ros_params import STOP_SIGNALS, declare_config, note_stop_signals, \
+    params_files, section_applies
 
 
 @pytest.fixture
@@ -205,3 +207,30 @@ def test_a_node_whose_shutdown_hangs_ends_itself_after_the_grace(tmp_path, grace
     # Given its grace to shut down cleanly, and not much more: the stacks say where it hung.
     assert grace_s <= took_s < grace_s + 3.0, (took_s, log)
     assert 'parent (pid' in log and 'Timeout' in log and '(most recent call first)' in log
+
+
+@pytest.mark.parametrize('namespace', ['', 'uav', 'a/b'])
+@pytest.mark.parametrize('key', ['plant', '/plant', 'uav/plant', '/uav/plant', '/**/plant',
+                                 '/**', '/*/plant', '/*', '/uav/*', '/**/vision', '/a/*/plant',
+                                 '/a/**/plant'])
+def test_a_file_section_applies_where_rclpy_applies_it(tmp_path, key, namespace):
+    path = tmp_path / 'params.yaml'
+    path.write_text(yaml.safe_dump({key: {'ros__parameters': {'rate_hz': 7.0}}}))
+    context = rclpy.Context()
+    rclpy.init(args=['--ros-args', '--params-file', str(path)], context=context)
+    try:
+        node = rclpy.create_node('plant', namespace=namespace, context=context,
+                                 automatically_declare_parameters_from_overrides=True)
+        applied = node.has_parameter('rate_hz')
+        assert section_applies(key, node.get_fully_qualified_name()) == applied
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def test_the_parameters_files_are_those_among_the_ros_arguments():
+    argv = ['node', '--params-file', 'not_ros.yaml', '--ros-args', '-p', 'a:=1',
+            '--params-file', 'one.yaml', '-r', '__ns:=/uav', '--params-file', 'two.yaml', '--',
+            '--params-file', 'after.yaml', '--ros-args', '--params-file', 'three.yaml']
+    assert params_files(argv) == ['one.yaml', 'two.yaml', 'three.yaml']
+    assert params_files(['node', '--ros-args', '--params-file']) == []

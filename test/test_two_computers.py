@@ -82,7 +82,6 @@ def test_the_mission_with_vision_across_the_link(link, tmp_path, record_property
         controller = side(
             fc_ns, cc_ip, '--no-vision', '--mission', 'inspect', '--record', str(run_dir),
             '--param', 'controller.mission.hold_time_s:=3.0',
-            '--param', 'plant.lockstep_timeout_s:=5.0',
             # Wall-clock log times: image out -> pose back, both on this side's clock.
             '--param', 'recorder.use_sim_time:=false',
             '--param', 'recorder.exclude:=camera/color/image_raw,camera/depth/image_raw,'

@@ -256,7 +256,7 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
 
 def test_vision_yaml_matches_the_node_parameters():
     params = yaml.safe_load((pathlib.Path(REPO) / 'config' / 'vision.yaml').read_text())
-    from_dict(VisionNodeConfig, params['vision']['ros__parameters'])
+    from_dict(VisionNodeConfig, params['/**/vision']['ros__parameters'])
 
 
 def test_pose_message_carries_the_result_or_minus_one():

@@ -2,6 +2,7 @@
 import array
 import difflib
 import math
+import re
 import signal
 import sys
 from typing import Any, Callable, Iterable, Mapping
@@ -11,6 +12,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
     SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
@@ -19,7 +21,7 @@ from rclpy.task import Future
 from uav_tilt_common import parent_watch
 from uav_tilt_common.node_entry import STOP_SIGNALS
 from uav_tilt_common.config import ConfigError, ConfigT, check_field, check_value, \
-    description, fields_flat, from_dict, replace_flat
+    description, fields_flat, from_dict, read_yaml, replace_flat
 from uav_tilt_common.ros_spin import spin_events
 
 INT64 = (-2**63, 2**63 - 1)
@@ -29,7 +31,8 @@ _ARRAY_TYPES: dict[type | None, Parameter.Type] = {
 
 
 def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
-                   on_change: Callable[[dict[str, Any]], None] | None = None) -> ConfigT:
+                   on_change: Callable[[dict[str, Any]], None] | None = None,
+                   argv: list[str] | None = None) -> ConfigT:
     """Declare every field of config ``cls`` as a parameter with a descriptor (description,
     unit, range, choices) and return the validated config.
 
@@ -37,7 +40,9 @@ def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
     ``ros2 param set`` of one is validated like a start value, written into the returned
     config, and ``on_change({name: value})`` is called. Every other parameter is read-only,
     so a change is refused with the reason. Raises ConfigError: one line naming the
-    parameter, its value and what is allowed (a wrong type included).
+    parameter, its value and what is allowed (a wrong type included), a parameter given that
+    the node does not declare (:func:`check_overrides`), or a parameters file in ``argv``
+    (the process's arguments by default) that misses the node (:func:`check_params_files`).
     """
     fields = fields_flat(cls)
     values: dict[str, Any] = {}
@@ -58,6 +63,8 @@ def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
     cfg = from_dict(cls, values)
     if dynamic:
         _watch_changes(node, cls, cfg, set(dynamic), on_change)
+    check_overrides(node)
+    check_params_files(node, params_files(sys.argv if argv is None else argv))
     return cfg
 
 
@@ -149,6 +156,46 @@ def check_overrides(node: Node) -> None:
                           f"'{node.get_name()}'{more}")
 
 
+def params_files(argv: list[str]) -> list[str]:
+    """The ``--params-file`` paths among the ROS arguments of ``argv``."""
+    files, in_ros = [], False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            in_ros = True
+        elif arg == '--':
+            in_ros = False
+        elif in_ros and arg == '--params-file' and i + 1 < len(argv):
+            files.append(argv[i + 1])
+    return files
+
+
+def section_applies(key: str, node_fqn: str) -> bool:
+    """Whether rcl gives the node ``node_fqn`` ('/uav/plant') the parameters under ``key``
+    of a parameters file: 'plant' is the node /plant only; '/**' is any namespace depth,
+    '/*' one level (rclpy's own matching)."""
+    pattern = key if key.startswith('/') else '/' + key
+    pattern = re.escape(pattern).replace(r'/\*\*', '(/\\w+)*').replace(r'/\*', '(/\\w+)')
+    return re.fullmatch(pattern, node_fqn) is not None
+
+
+def check_params_files(node: Node, files: Iterable[str]) -> None:
+    """ConfigError, one line, when a parameters file has a section named for this node that
+    rcl does not apply to it: `plant:` is for a node /plant, so the node run in a namespace
+    (/uav/plant) would take none of the file's values, and no misspelt name in it would be
+    found. A file whose sections are all for other nodes is fine (one file for a graph)."""
+    fqn, name = node.get_fully_qualified_name(), node.get_name()
+    for path in files:
+        sections = read_yaml(path)
+        keys = [str(key) for key in sections] if isinstance(sections, dict) else []
+        if any(section_applies(key, fqn) for key in keys):
+            continue
+        named = [key for key in keys if key.rstrip('/').rsplit('/', 1)[-1] == name]
+        if named:
+            raise ConfigError(f"parameters file {path}: section '{named[0]}' is not for node "
+                              f"'{fqn}', so none of it applies; name the section '/**/{name}' "
+                              f"(any namespace) or '{fqn}'")
+
+
 def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Create the node, serve it (:func:`uav_tilt_common.ros_spin.spin_events`) until a
     stop signal, and shut down cleanly (the ros2/demos pattern).
@@ -161,12 +208,16 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) ->
     """
     parent_watch.die_with_parent()
     stop = note_stop_signals()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _rclpy.RCLError as err:
+        # a parameters file that is missing or no YAML: rcl's message, less its source lines
+        print(f"[FATAL] {re.sub(r', at /[^,]*', '', str(err))}", file=sys.stderr, flush=True)
+        return 2
     node = None
     code = 0
     try:
         node = node_factory()
-        check_overrides(node)
         spin_events(node, stop)
     except ConfigError as err:
         print(f'[FATAL] {err}', file=sys.stderr, flush=True)

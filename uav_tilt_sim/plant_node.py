@@ -2,13 +2,14 @@
 
 Owns time: each 300 Hz tick it publishes the control-path sensors and /clock stamped t_k,
 then the camera frame when one is due (so that rendering overlaps the controller's tick).
-In lockstep it steps past t_k only once `actuators/cmd` stamped t_k has arrived, or after
-`lockstep_timeout_s` of wall time, when it applies the failsafe and free-runs until
-commands come back. In realtime, sim time follows the wall clock and late commands are
-counted, never waited for; when the host cannot keep up, the ticks it is behind by more
-than MAX_CATCH_UP are dropped (sim time slips), and plant/status reports the achieved
-real-time factor, the late commands and the dropped ticks, with a warning at most every
-REALTIME_WARN_PERIOD_S. The 300 Hz messages travel serialized (uav_tilt_common.cdr).
+In lockstep it steps past t_k only once `actuators/cmd` stamped t_k has arrived, sending
+t_k again every RESEND_PERIOD_S while it waits, or after `lockstep_timeout_s` of wall time,
+when it applies the failsafe and free-runs until commands come back. In realtime, sim time
+follows the wall clock and late commands are counted, never waited for; when the host
+cannot keep up, the ticks it is behind by more than MAX_CATCH_UP are dropped (sim time
+slips), and plant/status reports the achieved real-time factor, the late commands and the
+dropped ticks, with a warning at most every REALTIME_WARN_PERIOD_S. The 300 Hz messages
+travel serialized (uav_tilt_common.cdr).
 """
 import dataclasses
 import functools
@@ -35,7 +36,8 @@ from uav_tilt_sim.command_check import check_command
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
 
-# Before the first command the current tick is re-sent this often (late-joining controllers).
+# A tick unanswered this long is sent again, and again as often: before the first command for
+# a controller that joins late, after it for a message lost to a stalled process.
 RESEND_PERIOD_S = 0.25
 # Free-running ticks one timer callback may step to catch up with the wall clock; a larger
 # backlog is dropped: a burst of them would come too fast for the controller to answer.
@@ -55,7 +57,9 @@ class PlantNodeConfig(PlantCoreConfig):
                       doc='lockstep: wait for each tick\'s command; realtime: follow the clock')
     rtf: float = param(0.0, lo=0.0, hi=1000.0, doc='target real-time factor, 0 = as fast '
                        'as possible')
-    lockstep_timeout_s: float = param(0.5, lo=0.005, hi=60.0,
+    # A stalled controller only slows a lockstep run down; the failsafe is for one that is
+    # gone, so the wait outlasts what a loaded machine stalls a process for (seconds).
+    lockstep_timeout_s: float = param(5.0, lo=0.005, hi=60.0,
                                       doc='wall time to wait for a command before failsafe')
     timeout_failsafe: str = param('cut_thrust', choices=('cut_thrust', 'hold_last'),
                                   doc='what a lockstep timeout applies')
@@ -110,12 +114,12 @@ class PlantNode(Node):
                                    raw=True)
 
         self.rejects = RejectCounter()
-        self.stats = dict(lockstep_waits=0, lockstep_timeouts=0, late_commands=0,
-                          clamped_commands=0, commands=0, dropped_ticks=0)
+        self.stats = dict(lockstep_waits=0, lockstep_timeouts=0, resent_ticks=0,
+                          late_commands=0, clamped_commands=0, commands=0, dropped_ticks=0)
         self.waiting = False            # lockstep: waiting for the command of this tick
         self.synced = False             # lockstep: a command has arrived since the last timeout
         self.ever_commanded = False
-        self.wait_started = time.monotonic()
+        self.wait_started = self.resent_at = time.monotonic()
         self.wall_start = time.monotonic()
         self.sim_start = 0.0
         self.last_status = (time.monotonic(), 0.0)
@@ -228,12 +232,19 @@ class PlantNode(Node):
             self.on_command(msg)
         if not self.waiting:
             return
-        waited = time.monotonic() - self.wait_started
+        now = time.monotonic()
+        waited = now - self.wait_started
         if not self.ever_commanded:
             if waited > RESEND_PERIOD_S:
-                self.wait_started = time.monotonic()
+                self.wait_started = now
                 self._publish_sensors()
             return
+        if now - self.resent_at > RESEND_PERIOD_S and waited <= self.cfg.lockstep_timeout_s:
+            # a tick or its answer lost on the way (a stalled process's full buffers): DDS
+            # would repair it only at the writer's next heartbeat, seconds on
+            self.resent_at = now
+            self.stats['resent_ticks'] += 1
+            self._publish_sensors()
         if waited > self.cfg.lockstep_timeout_s:
             self.stats['lockstep_timeouts'] += 1
             self.get_logger().warn(
@@ -294,7 +305,7 @@ class PlantNode(Node):
         if self.cfg.mode == 'lockstep' and self.synced:
             self.stats['lockstep_waits'] += 1
         self.waiting = self.cfg.mode == 'lockstep' and (self.synced or not self.ever_commanded)
-        self.wait_started = time.monotonic()
+        self.wait_started = self.resent_at = time.monotonic()
         if self.cfg.camera_enabled and self.plant.tick % self.camera_every == 0:
             rgb, depth, _ = self.plant.render()
             self._publish_frame(self.plant.t_s, rgb, depth)
