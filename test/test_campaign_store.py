@@ -85,6 +85,12 @@ def test_a_plan_resumes_however_its_path_is_written(tmp_path):
     result = cp.campaign(1, SEED, duration_s=0.1, progress=False, out=tmp_path, resume=True,
                          **files)
     assert result['n'] == 1
+    # relative to the working folder, as typed in the checkout
+    relative = {k: os.path.relpath(v) for k, v in files.items()}
+    assert not any(os.path.isabs(v) for v in relative.values())
+    result = cp.campaign(1, SEED, duration_s=0.1, progress=False, out=tmp_path, resume=True,
+                         **relative)
+    assert result['n'] == 1
 
 
 def test_a_damaged_store_is_refused_and_keeps_its_runs(tmp_path):

@@ -38,12 +38,18 @@ def written(tmp_path, name, data):
     ({'wall': 0}, ["'wall'", 'mapping']),
     ({'wall': []}, ["'wall'", 'mapping']),
     (b'\xff\xfe not text', ['scenario', 'utf-8']),
+    # empty (a bare wall would be flown), or no mapping (its text is not repeated)
+    ('', ['scenario.yaml', 'empty']),
+    ('# nothing yet\n', ['scenario.yaml', 'empty']),
+    ('root:x:0:0:root:/root:/bin/bash\n' * 3, ['scenario.yaml', 'a str', 'mapping']),
+    ([1, 2], ['scenario.yaml', 'a list', 'mapping']),
 ])
 def test_a_bad_scenario_file_is_one_line(tmp_path, capsys, scenario, words):
     path = written(tmp_path, 'scenario.yaml', scenario)
     code, out, err = refusal(capsys, ['fly', '--scenario', path])
     assert code == 2 and out == '' and len(err) == 1, err
     assert err[0].startswith('uav-tilt fly:') and all(w in err[0] for w in words), err
+    assert len(err[0]) < 200
 
 
 @pytest.mark.parametrize('plan, words', [

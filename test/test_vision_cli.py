@@ -35,9 +35,13 @@ def test_the_default_models_are_the_packages_from_any_folder(data4, elsewhere, c
 @pytest.mark.parametrize('args, named', [
     (['eval', '--data', 'nonexistent', '--model', FP32], 'nonexistent'),
     (['eval', '--data', 'DATA', '--model', 'models/nope.pt'], 'models/nope.pt'),
-    (['profile', '--model', 'nope.pt'], 'nope.pt')])
+    (['profile', '--model', 'nope.pt'], 'nope.pt'),
+    # a file where a folder goes
+    (['eval', '--data', 'FILE', '--model', FP32], 'a_file'),
+    (['dataset', '--out', 'FILE', '--n', '2'], 'a_file')])
 def test_a_missing_input_is_one_line_and_exit_2(data4, elsewhere, capsys, args, named):
-    args = [str(data4) if a == 'DATA' else a for a in args]
+    (elsewhere / 'a_file').write_text('not a folder')
+    args = [{'DATA': str(data4), 'FILE': 'a_file'}.get(a, a) for a in args]
     assert vision_cli.main(args) == 2
     out, err = capsys.readouterr()
     assert err.startswith('uav-tilt vision: error: ') and named in err

@@ -2,6 +2,9 @@
 import argparse
 import math
 
+# The exit code of a command stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
+INTERRUPTED = 130
+
 
 def number(kind, text):
     """``kind(text)`` (int or float); argparse's error when it is none."""

@@ -202,9 +202,14 @@ def replace_flat(cfg: Any, values: Mapping[str, Any]) -> None:
 def load_yaml(cls: type[ConfigT], path: str | os.PathLike[str],
               parameter: str = 'file') -> ConfigT:
     """Load and validate config ``cls`` from a plain YAML file; a file that cannot be read
-    or parsed is one ConfigError line naming ``parameter``."""
+    or parsed, is empty or holds no mapping is one ConfigError line naming ``parameter``."""
     try:
         data = read_yaml(path)
+        if data is None:        # all defaults: more likely a file not written yet
+            raise ConfigError('the file is empty')
+        if not isinstance(data, dict):
+            raise ConfigError(f'the file holds a {type(data).__name__}, not a mapping of '
+                              f'parameters')
     except ConfigError as err:
         raise ConfigError(f"parameter '{parameter}' = {str(path)!r}: {err}") from None
     return from_dict(cls, data)

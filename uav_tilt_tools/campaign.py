@@ -25,6 +25,7 @@ import tempfile
 
 import numpy as np
 
+from uav_tilt_common.cli_args import INTERRUPTED
 from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_tools.fly import DURATION_S, jsonable
 from uav_tilt_common.targets import OBJECT_CLASSES
@@ -227,10 +228,11 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=Non
     store = None
     if out is not None:
         from uav_tilt_tools.campaign_store import RunStore
-        # files as the same path however written ('./a.yaml', 'a.yaml'), for the resume
+        # files as the same path however written ('./a.yaml', 'a.yaml', absolute), for the
+        # resume
         args = dict(n=n, seed=seed, target_source=target_source, duration_s=duration_s,
-                    plan_file=plan_file and os.path.normpath(plan_file),
-                    scenario_file=scenario_file and os.path.normpath(scenario_file))
+                    plan_file=plan_file and os.path.realpath(plan_file),
+                    scenario_file=scenario_file and os.path.realpath(scenario_file))
         if corners:     # only then, so that folders of earlier campaigns still resume
             args['corners'] = True
         store = RunStore(out, args, resume)
@@ -298,8 +300,14 @@ def _local_runs(run_one, jobs, workers, address=None):
 
 def _ignore_sigint():
     # Ctrl-C reaches the whole process group: the parent keeps what finished and
-    # terminates the pool, instead of every worker printing a traceback.
+    # terminates the pool, instead of every worker printing a traceback. The pool ends a
+    # worker with SIGTERM: leaving by SystemExit, it removes its run's temporary folder.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _leave)
+
+
+def _leave(signum, frame):
+    raise SystemExit(128 + signum)
 
 
 def register(sub):
@@ -358,6 +366,6 @@ def _run(args):
         return 1
     except Interrupted as err:
         print(f'uav-tilt campaign: {err}', file=sys.stderr)
-        return 130
+        return INTERRUPTED
     print(json.dumps(result, default=jsonable))
     return 0 if result['n'] else 1

@@ -5,7 +5,10 @@ its parser and sets ``func`` (args -> exit code).
 """
 import argparse
 import importlib
+import signal
 import sys
+
+from uav_tilt_common.cli_args import INTERRUPTED
 
 COMMAND_MODULES = (
     'uav_tilt_tools.bench',
@@ -27,9 +30,21 @@ def build_parser():
 
 
 def main(argv=None):
-    """Entry point of `uav-tilt`."""
+    """Entry point of `uav-tilt`. Ctrl-C, or SIGTERM (kill, timeout), ends a command with
+    one line and exit code 130: what it started (worker processes, temporary folders, a
+    graph) goes with it, which a process killed by the signal would leave behind."""
     args = build_parser().parse_args(argv)
-    return args.func(args)
+    if not getattr(args, 'own_signals', False):     # `topic` stops its ROS session itself
+        signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print(f'uav-tilt {args.command}: interrupted', file=sys.stderr)
+        return INTERRUPTED
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
 
 
 if __name__ == '__main__':

@@ -9,7 +9,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import ExternalShutdownException
 
-from uav_tilt_common import names, parent_watch, ros_msgs, ros_qos
+from uav_tilt_common import cli_args, names, parent_watch, ros_msgs, ros_qos
 from uav_tilt_common.modes import NOT_FLYING, Mode
 
 
@@ -43,7 +43,7 @@ def main(args=None):
 
     node.create_subscription(DiagnosticArray, names.CONTROLLER_STATUS, on_status,
                              ros_qos.STATUS)
-    code = 130
+    code = cli_args.INTERRUPTED
     try:
         while watch.result is None and rclpy.ok():
             rclpy.spin_once(node, timeout_sec=0.5)

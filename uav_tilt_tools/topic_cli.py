@@ -14,7 +14,6 @@ from uav_tilt_common import cli_args
 # Sequences longer than this print as a count, as image data would flood the terminal.
 MAX_SEQUENCE = 32
 # The exit code of a command Ctrl-C stopped before it had anything to show (128 + SIGINT).
-INTERRUPTED = 130
 
 
 def register(sub):
@@ -24,18 +23,18 @@ def register(sub):
     listing = verbs.add_parser('list', help='topic names and types')
     listing.add_argument('--wait', type=cli_args.duration_s, default=3.0,
                          help='seconds of discovery at least (no daemon keeps the graph)')
-    listing.set_defaults(func=run_list)
+    listing.set_defaults(func=run_list, own_signals=True)
     echo = verbs.add_parser('echo', help='print messages as YAML')
     echo.add_argument('topic', type=topic_name)
     count = echo.add_mutually_exclusive_group()
     count.add_argument('--once', action='store_const', const=1, dest='n')
     count.add_argument('-n', type=cli_args.count, help='stop after N messages')
-    echo.set_defaults(func=run_echo)
+    echo.set_defaults(func=run_echo, own_signals=True)
     hz = verbs.add_parser('hz', help='message rate over a window of wall time')
     hz.add_argument('topic', type=topic_name)
     hz.add_argument('--window', type=cli_args.duration_s, default=5.0,
                     help='seconds to listen (Ctrl-C: the rate so far)')
-    hz.set_defaults(func=run_hz)
+    hz.set_defaults(func=run_hz, own_signals=True)
     for verb in (listing, echo, hz):
         verb.add_argument('--timeout', type=cli_args.duration_s, default=10.0,
                           help='seconds to wait for the topic to appear')
@@ -179,7 +178,7 @@ def run_echo(args):
             printed.append(1)
     with _Session() as session:
         if session.subscribe(args.topic, args.timeout, show) is None:
-            return INTERRUPTED if session.interrupted else 1
+            return cli_args.INTERRUPTED if session.interrupted else 1
         session.spin_until(lambda: args.n is not None and len(printed) >= args.n,
                            float('inf'))
     return 0
@@ -192,7 +191,7 @@ def run_hz(args):
     with _Session() as session:
         if session.subscribe(args.topic, args.timeout,
                              lambda _: arrivals.append(time.monotonic())) is None:
-            return INTERRUPTED if session.interrupted else 1
+            return cli_args.INTERRUPTED if session.interrupted else 1
         start = time.monotonic()
         session.spin_until(lambda: False, args.window)
         listened_s = time.monotonic() - start

@@ -280,7 +280,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         torch.set_num_threads(a.threads)
     try:
         result = a.run(a)
-    except (FileNotFoundError, ConfigError) as err:     # bad input, not a bug: no traceback
+    except (OSError, ConfigError) as err:     # a bad path or set, not a bug: no traceback
         print(f'{ap.prog}: error: {err}', file=sys.stderr)
         return 2
     print(json.dumps(result, indent=2))

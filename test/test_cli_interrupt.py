@@ -1,0 +1,73 @@
+"""Ctrl-C (to the process group, as a terminal sends it) and SIGTERM (to the command alone,
+as `kill` or `timeout` send it) end a `uav-tilt` command with one line and exit code 130,
+leaving no worker process and no temporary folder behind."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from ros_graph import REPO, alive
+
+FLY = ['fly', '--scenario', 'config/scenarios/default.yaml', '--target-source', 'ground_truth']
+CAMPAIGN = ['campaign', '--n', '2', '--workers', '1', '--duration', '60']
+
+
+def children(pid):
+    """The pids whose parent is ``pid``."""
+    found = []
+    for entry in os.listdir('/proc'):
+        try:
+            with open(f'/proc/{entry}/stat') as stream:
+                if int(stream.read().rsplit(')', 1)[1].split()[1]) == pid:
+                    found.append(int(entry))
+        except (OSError, ValueError, IndexError):
+            continue
+    return found
+
+
+def started(tmp_path, args):
+    """`uav-tilt ARGS` with its own TMPDIR, SIGINT at its default (a terminal's foreground
+    job has it so even when the tests run as a background job, which starts with it
+    ignored); returns once a run's temporary folder is there."""
+    tmp = tmp_path / 'tmp'
+    tmp.mkdir()
+    proc = subprocess.Popen([sys.executable, '-m', 'uav_tilt_tools.cli', *args], cwd=REPO,
+                            env=dict(os.environ, TMPDIR=str(tmp)), process_group=0,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    return proc, tmp
+
+
+def wait_for(predicate, timeout_s):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not predicate():
+        time.sleep(0.1)
+    return predicate()
+
+
+@pytest.mark.parametrize('args, how', [(FLY, 'ctrl-c'), (CAMPAIGN, 'ctrl-c'),
+                                       (CAMPAIGN, 'sigterm')],
+                         ids=['fly-ctrl-c', 'campaign-ctrl-c', 'campaign-sigterm'])
+def test_an_interrupted_command_is_one_line_and_leaves_nothing(tmp_path, args, how):
+    proc, tmp = started(tmp_path, [*args, *(['--out', str(tmp_path / 'out')]
+                                            if args is CAMPAIGN else [])])
+    if args is CAMPAIGN:    # a worker is flying its run in its temporary folder
+        assert wait_for(lambda: any(p.name.startswith('uav_tilt_run_') for p in tmp.iterdir())
+                        or proc.poll() is not None, 120.0)
+    else:                   # flying, well past the imports
+        assert not wait_for(lambda: proc.poll() is not None, 8.0)
+    workers = children(proc.pid)
+    if how == 'ctrl-c':
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    lines = [line for line in stderr.splitlines() if line.strip()]   # after the progress bar
+    assert 'Traceback' not in stderr and stdout == ''
+    assert lines[-1].startswith(f'uav-tilt {args[0]}: interrupted'), stderr
+    assert wait_for(lambda: not any(alive(pid) for pid in workers), 10.0), workers
+    assert not list(tmp.glob('uav_tilt_run_*'))
