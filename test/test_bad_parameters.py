@@ -98,3 +98,13 @@ def test_a_file_for_the_whole_graph_is_taken_by_each_node(tmp_path):
                                     '/uav/plant': {'ros__parameters': {'zz_misspelt': 1.0}}}))
     fatal_line(tmp_path, 'uav_tilt_sim.plant_node', '--params-file', str(path),
                words=["unknown parameter 'zz_misspelt'"])
+
+
+@pytest.mark.parametrize('output', ['runs/gt', 'runs/gt/recording.mcap'])
+def test_a_recording_is_never_overwritten(tmp_path, output):
+    earlier = tmp_path / 'runs' / 'gt' / 'recording.mcap'
+    earlier.parent.mkdir(parents=True)
+    earlier.write_bytes(b'an earlier run')
+    fatal_line(tmp_path, 'uav_tilt_tools.recorder_node', '-p', f'output:={output}',
+               words=["'output'", str(earlier.relative_to(tmp_path)), 'never overwritten'])
+    assert earlier.read_bytes() == b'an earlier run'

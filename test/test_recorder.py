@@ -1,6 +1,8 @@
 """recorder_node against a live plant: every topic with its type, rates, complete on SIGINT,
-readable up to its last flush after SIGKILL. Read back with the mcap/mcap_ros2 readers."""
+readable up to its last flush after SIGKILL. Read back with the mcap/mcap_ros2 readers. And
+where its `output` goes."""
 import collections
+import os
 import time
 
 import pytest
@@ -11,6 +13,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from ros_graph import Probe, start, stop
 from uav_tilt_common import names, ros_qos
+from uav_tilt_tools.recorder_node import output_path
 
 RTF = 0.25              # slow enough that plant, camera and two recorders keep up on 2 cores
 RECORD_WALL_S = 8.0
@@ -126,3 +129,13 @@ def test_a_killed_recorder_leaves_its_flushed_chunks_readable(recordings):
     assert imu and all(b > a for a, b in zip(imu, imu[1:]))
     # Chunks are flushed every 0.5 s of wall time: at most ~1 s wall (RTF s sim) is lost.
     assert (last_full - imu[-1]) * 1e-9 < 2.0 * RTF
+
+
+@pytest.mark.parametrize('output, path', [
+    ('runs/a', 'runs/a/recording.mcap'), ('runs/b/', 'runs/b/recording.mcap'),
+    ('runs/c/run.mcap', 'runs/c/run.mcap'), ('run.mcap', 'run.mcap')])
+def test_the_output_is_a_folder_unless_it_names_an_mcap_file(tmp_path, monkeypatch, output,
+                                                             path):
+    monkeypatch.chdir(tmp_path)
+    assert os.path.normpath(output_path(output)) == os.path.normpath(path)
+    assert (tmp_path / path).parent.is_dir() and not (tmp_path / path).exists()

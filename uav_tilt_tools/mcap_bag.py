@@ -17,11 +17,12 @@ CHUNK_BYTES = 1 << 20
 
 
 class McapBag:
-    """Writer of one MCAP file; call :meth:`close` to complete it."""
+    """Writer of one new MCAP file (a file already there is an error: a recording is never
+    overwritten); call :meth:`close` to complete it."""
 
     def __init__(self, path, chunk_bytes=CHUNK_BYTES):
         self.path = str(path)
-        self._stream = open(self.path, 'wb')
+        self._stream = open(self.path, 'xb')
         self._writer = Writer(self._stream, chunk_size=chunk_bytes,
                               compression=CompressionType.ZSTD)
         self._writer.start(profile='ros2', library=LIBRARY)

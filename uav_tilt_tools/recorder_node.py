@@ -38,7 +38,8 @@ QUEUE_DEPTH = 100
 class RecorderConfig:
     """Parameters of recorder_node."""
 
-    output: str = param(DEFAULT_FILE, doc='MCAP file, or folder that gets recording.mcap')
+    output: str = param(DEFAULT_FILE, doc='a new MCAP file (*.mcap), or a folder that gets '
+                        'recording.mcap')
     # The debug image is drawn only for subscribers, so recording it would load the vision
     # node it observes.
     exclude: str = param(names.VISION_DEBUG_IMAGE, doc='comma-separated topics not to record')
@@ -49,8 +50,9 @@ class RecorderConfig:
 
 
 def output_path(output):
-    """The MCAP path of parameter ``output``: a folder gets recording.mcap inside."""
-    if os.path.isdir(output) or output.endswith(os.sep):
+    """The MCAP path of parameter ``output``: a name ending in .mcap is the file, any other
+    a folder (made when missing, like its parents) that gets recording.mcap."""
+    if not output.endswith('.mcap'):
         os.makedirs(output, exist_ok=True)
         return os.path.join(output, DEFAULT_FILE)
     os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
@@ -75,6 +77,9 @@ class RecorderNode(Node):
         # waits for the file), so before the plant's first tick.
         try:
             self.bag = McapBag(output_path(self.cfg.output))
+        except FileExistsError as err:
+            raise ConfigError(f"parameter 'output' = {self.cfg.output!r}: {err.filename} is "
+                              f"there already (a recording is never overwritten)") from None
         except OSError as err:
             raise ConfigError(f"parameter 'output' = {self.cfg.output!r}: {err.strerror}") \
                 from None
