@@ -57,6 +57,28 @@ def test_echo_once_prints_one_message_as_yaml(plant):
     assert float(gravity.group(1)) == pytest.approx(9.81, abs=0.5)   # resting on the ground
 
 
+@pytest.mark.parametrize('option, whole', [((), True), (('-l', '10'), False),
+                                           (('-l', '10', '--full-length'), None)])
+def test_echo_prints_sequences_up_to_the_truncate_length(plant, option, whole):
+    code, out = cli('topic', 'echo', 'odom', '--once', *option)
+    if whole is None:           # the two together are refused
+        assert code == 2
+        return
+    assert code == 0
+    # a covariance is 36 values, under `ros2 topic echo`'s default length of 128
+    covariance = re.search(r'\n  covariance:(.*?)\ntwist:', out, re.S).group(1)
+    if whole:
+        assert len(covariance.strip().splitlines()) == 36, covariance
+    else:
+        assert covariance.strip() == "'<sequence of 36 values>'"
+
+
+def test_echo_shows_a_status_whole(plant):
+    code, out = cli('topic', 'echo', 'plant/status', '--once')
+    assert code == 0 and 'sequence of' not in out
+    assert "key: 'sim_time_s'" in out and "key: 'lockstep_waits'" in out
+
+
 def test_echo_absolute_latched_topic(plant):
     code, out = cli('topic', 'echo', '/uav/ground_truth/target', '-n', '1')
     assert code == 0 and "frame_id: 'map'" in out

@@ -11,8 +11,10 @@ import numpy as np
 
 from uav_tilt_common import cli_args
 
-# Sequences longer than this print as a count, as image data would flood the terminal.
-MAX_SEQUENCE = 32
+# Sequences longer than this print as a count, as image data would flood the terminal
+# (`ros2 topic echo`'s default --truncate-length): statuses (40 key-values) and covariances
+# (36) show whole.
+MAX_SEQUENCE = 128
 # The exit code of a command Ctrl-C stopped before it had anything to show (128 + SIGINT).
 
 
@@ -29,6 +31,12 @@ def register(sub):
     count = echo.add_mutually_exclusive_group()
     count.add_argument('--once', action='store_const', const=1, dest='n')
     count.add_argument('-n', type=cli_args.count, help='stop after N messages')
+    length = echo.add_mutually_exclusive_group()
+    length.add_argument('--truncate-length', '-l', type=cli_args.count, default=MAX_SEQUENCE,
+                        metavar='N', help='print longer sequences as their length '
+                                          f'(default {MAX_SEQUENCE})')
+    length.add_argument('--full-length', '-f', action='store_const', const=None,
+                        dest='truncate_length', help='print every sequence whole')
     echo.set_defaults(func=run_echo, own_signals=True)
     hz = verbs.add_parser('hz', help='message rate over a window of wall time')
     hz.add_argument('topic', type=topic_name)
@@ -53,8 +61,9 @@ def topic_name(text):
 
 
 # --- pure helpers -------------------------------------------------------------------------
-def to_yaml(msg, indent=0):
-    """YAML-ish text of a ROS message (what `ros2 topic echo` prints)."""
+def to_yaml(msg, indent=0, max_sequence=MAX_SEQUENCE):
+    """YAML-ish text of a ROS message (what `ros2 topic echo` prints); a sequence longer
+    than ``max_sequence`` (None: no limit) prints as its length."""
     pad = '  ' * indent
     lines = []
     for name, field_type in msg.get_fields_and_field_types().items():
@@ -63,17 +72,17 @@ def to_yaml(msg, indent=0):
             value = value[0]
         if hasattr(value, 'get_fields_and_field_types'):
             lines.append(f'{pad}{name}:')
-            lines.append(to_yaml(value, indent + 1))
+            lines.append(to_yaml(value, indent + 1, max_sequence))
         elif isinstance(value, (list, tuple, array.array, np.ndarray, bytes)):
-            lines.append(f'{pad}{name}:' + _sequence(value, indent))
+            lines.append(f'{pad}{name}:' + _sequence(value, indent, max_sequence))
         else:
             lines.append(f'{pad}{name}: {value!r}' if isinstance(value, str)
                          else f'{pad}{name}: {value}')
     return '\n'.join(lines)
 
 
-def _sequence(values, indent):
-    if len(values) > MAX_SEQUENCE:
+def _sequence(values, indent, max_sequence):
+    if max_sequence is not None and len(values) > max_sequence:
         return f" '<sequence of {len(values)} values>'"
     if not len(values):
         return ' []'
@@ -81,7 +90,7 @@ def _sequence(values, indent):
     items = []
     for value in values:
         if hasattr(value, 'get_fields_and_field_types'):
-            items.append(f'{pad}-\n' + to_yaml(value, indent + 1))
+            items.append(f'{pad}-\n' + to_yaml(value, indent + 1, max_sequence))
         else:
             items.append(f'{pad}- {value!r}' if isinstance(value, str) else f'{pad}- {value}')
     return '\n' + '\n'.join(items)
@@ -174,7 +183,7 @@ def run_echo(args):
 
     def show(msg):
         if args.n is None or len(printed) < args.n:
-            print(to_yaml(msg) + '\n---', flush=True)
+            print(to_yaml(msg, max_sequence=args.truncate_length) + '\n---', flush=True)
             printed.append(1)
     with _Session() as session:
         if session.subscribe(args.topic, args.timeout, show) is None:
