@@ -65,9 +65,9 @@ def plant_statuses(t_end, rtf):
         for t in np.arange(0.0, t_end, 0.5)]
 
 
-def synthetic_recording(push_n, contact_force_n=6.0, tip_offset=TIP_OFFSET):
+def synthetic_recording(push_n, contact_force_n=6.0, tip_offset=TIP_OFFSET, contact_lost=1):
     """Vehicle facing +x with its tool tip at POI + ``tip_offset``, pushing ``push_n[k]``;
-    the controller was asked for ``contact_force_n``."""
+    the controller was asked for ``contact_force_n`` and counted ``contact_lost``."""
     t = np.arange(N) * DT
     p_body = POI + tip_offset - np.array([TOOL_X, 0.0, 0.0])
     rec = {names.GROUND_TRUTH_ODOM: [], names.EE_WRENCH: [], names.CLOCK: []}
@@ -89,7 +89,8 @@ def synthetic_recording(push_n, contact_force_n=6.0, tip_offset=TIP_OFFSET):
              (1.0, Mode.HOLD), (HOLD_LAST, Mode.HOLD), (1.7, Mode.RETREAT), (1.9, Mode.IDLE)]
     base = controller_status(contact_force_n)
     rec[names.CONTROLLER_STATUS] = [
-        (wall_ns(tc), status(tc, base, mode=mode.value, success=tc >= 1.9, contact_lost=1))
+        (wall_ns(tc), status(tc, base, mode=mode.value, success=tc >= 1.9,
+                             contact_lost=contact_lost))
         for tc, mode in modes]
     rec[names.PLANT_STATUS] = plant_statuses(2.0, 0.5)
     return rec, t
@@ -226,10 +227,12 @@ def test_report_command_reads_the_mcap_and_writes_summary_and_plots(tmp_path, ca
     for log_ns, topic, msg in in_time_order(rec):
         write(bag, topic, msg, log_ns)
     bag.close()
-    assert report.run(argparse.Namespace(run_dir=str(tmp_path))) == 0
+    # the tool tip off the point of interest: the run missed the bar, exit 1 (as fly)
+    assert report.run(argparse.Namespace(run_dir=str(tmp_path))) == 1
     assert 'incomplete' not in capsys.readouterr().out
     summary = json.loads((tmp_path / 'summary.json').read_text())
     assert summary == report.summarize(rec, TOOL_X)
+    assert summary['failure']['reason'] == 'off_target'
     assert summary['force_mean_n'] == pytest.approx(5.5)
     for plot in ('trajectory.png', 'force.png', 'poi_error.png'):
         assert (tmp_path / plot).stat().st_size > 1000
@@ -238,8 +241,26 @@ def test_report_command_reads_the_mcap_and_writes_summary_and_plots(tmp_path, ca
     assert not (tmp_path / 'vision.png').exists()
 
 
+def test_the_report_exits_0_only_for_a_run_that_met_the_bar(tmp_path, capsys):
+    # met; pushing half the force asked; the tool tip 5 cm off the point of interest
+    for tip_offset, push_n, code in ((np.zeros(3), 6.0, 0), (np.zeros(3), 3.0, 1),
+                                     (TIP_OFFSET, 6.0, 1)):
+        rec, _ = synthetic_recording(np.full(N, push_n), tip_offset=tip_offset,
+                                     contact_lost=0)
+        run = tmp_path / f'run_{len(list(tmp_path.iterdir()))}'
+        run.mkdir()
+        bag = open_bag(run / 'recording.mcap')
+        for log_ns, topic, msg in in_time_order(rec):
+            write(bag, topic, msg, log_ns)
+        bag.close()
+        assert report.run(argparse.Namespace(run_dir=str(run))) == code
+        summary = json.loads(capsys.readouterr().out)
+        assert (summary['failure'] is None) == (code == 0), summary['failure']
+
+
 def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, capsys):
-    """As a killed recorder leaves it: flushed chunks, then a torn one, no summary."""
+    """As a killed recorder leaves it: flushed chunks, then a torn one, no summary. (The
+    run is 5 cm off its point of interest: each report exits 1.)"""
     rec, _ = synthetic_recording(np.full(N, 5.5))
     live = tmp_path / 'live'
     live.mkdir()
@@ -259,7 +280,7 @@ def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, cap
         data = src.read()
         dst.write(data[:flushed + 100])     # the second chunk torn, no footer
     bag.close()
-    assert report.run(argparse.Namespace(run_dir=str(run))) == 0
+    assert report.run(argparse.Namespace(run_dir=str(run))) == 1
     out, err = capsys.readouterr()
     assert 'incomplete (no footer' in err and f'read {cut} messages' in err
     summary = json.loads((run / 'summary.json').read_text())
@@ -270,19 +291,19 @@ def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, cap
     assert summary['force_mean_n'] == pytest.approx(5.5) and summary['success'] is False
     # The finished file reads completely.
     shutil.copy(live / 'recording.mcap', run / 'recording.mcap')
-    assert report.run(argparse.Namespace(run_dir=str(run))) == 0
+    assert report.run(argparse.Namespace(run_dir=str(run))) == 1
     assert 'incomplete' not in capsys.readouterr().err
     assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
     # a file torn within its first record (shorter than MCAP's footer) is an empty run
     for size in (len(MCAP0_MAGIC), 20):
         (run / 'recording.mcap').write_bytes(data[:size])
-        assert report.run(argparse.Namespace(run_dir=str(run))) == 0
+        assert report.run(argparse.Namespace(run_dir=str(run))) == 1
         out, err = capsys.readouterr()
         assert 'read 0 messages' in err and json.loads(out)['success'] is None   # no data
     # the file itself, as well as its folder; the summary goes beside it
     shutil.copy(live / 'recording.mcap', run / 'recording.mcap')
     (run / 'summary.json').unlink()
-    assert report.run(argparse.Namespace(run_dir=str(run / 'recording.mcap'))) == 0
+    assert report.run(argparse.Namespace(run_dir=str(run / 'recording.mcap'))) == 1
     assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
 
 

@@ -37,8 +37,9 @@ def register(sub):
 
 def run(args):
     """Write summary.json and the plots beside the recording; print the summary (stdout:
-    the JSON alone). Returns 0, or 2 with one line on stderr when RUN_DIR is no folder with
-    one MCAP recording, nor such a file."""
+    the JSON alone). Returns 0 when the run met the inspection bar (``failure`` null), 1
+    when it did not (as `uav-tilt fly`), or 2 with one line on stderr when RUN_DIR is no
+    folder with one MCAP recording, nor such a file."""
     from uav_tilt_tools.report_plots import write_plots   # matplotlib only when plotting
     notes = []
     try:
@@ -56,7 +57,7 @@ def run(args):
         json.dump(summary, stream, indent=2)
     write_plots(rec, folder, tool_tip_x_m)
     print(json.dumps(summary))
-    return 0
+    return 0 if summary['failure'] is None else 1
 
 
 def real_time_factor(plant_statuses):
