@@ -22,7 +22,8 @@ from uav_tilt_sim.camera import CameraConfig
 from uav_tilt_sim.scenario import DEFAULT_SCENARIO
 from uav_tilt_tools import topic_graph
 from uav_tilt_vision.pipeline import FrameResult
-from uav_tilt_vision.vision_node import VisionNodeConfig, pose_msg
+from uav_tilt_vision.vision_node import NO_CAMERA_INFO_WARN_FRAMES, VisionNodeConfig, \
+    pose_msg
 
 # The probe keeps every message of these topics (nothing may be missed in the counts).
 KEEP_ALL = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -95,6 +96,18 @@ def test_without_a_model_every_frame_is_no_target_and_bad_input_is_counted(tmp_p
                                          np.zeros((0, 64), np.float32)),
                'depth_invalid': camera_frame(ros_msgs.to_stamp(0.4),
                                              depth=np.full((48, 64), np.nan, np.float32))}
+        # Frames before any camera_info (it can be overtaken) are dropped, quietly until
+        # they are too many to be early ones.
+        log = tmp_path / 'vision.log'
+        for k in range(NO_CAMERA_INFO_WARN_FRAMES + 5):
+            for pub, msg in zip(pubs[1:], camera_frame(ros_msgs.to_stamp(0.001 * k))[1:]):
+                pub.publish(msg)
+            probe.spin_until(lambda: False, 0.05)
+            if k == NO_CAMERA_INFO_WARN_FRAMES - 2:
+                probe.spin_until(lambda: False, 0.5)
+                assert 'camera_info' not in log.read_text(), log.read_text()
+        assert probe.spin_until(lambda: 'no camera/camera_info yet' in log.read_text(), 10.0)
+        assert not probe.messages[names.TARGET_POSE]
         # Intrinsics first: a frame that overtakes the first camera_info is not processed.
         pubs[0].publish(camera_frame(ros_msgs.to_stamp(0.0))[0])
         probe.spin_until(lambda: False, 1.0)

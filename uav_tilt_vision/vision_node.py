@@ -35,6 +35,9 @@ from uav_tilt_vision.target_pose import CameraIntrinsics
 
 # Tried in this order, beside ``model_path``, when it cannot be loaded.
 FALLBACK_MODELS = ('detector_int8.onnx', 'detector_pruned.pt', 'detector_fp32.pt')
+# Frames before the first camera_info are dropped quietly: it travels on a topic of its own,
+# so a first frame can overtake it. This many in a row mean it is not coming: said once.
+NO_CAMERA_INFO_WARN_FRAMES = 30
 
 
 @dataclasses.dataclass
@@ -131,6 +134,7 @@ class VisionNode(Node):
         sub(self, CameraInfo, names.CAMERA_INFO, self.on_camera_info, q)
         self.latest = {'color': None, 'depth': None}   # (msg, wall arrival time)
         self.rejects = RejectCounter()
+        self.frames_without_info = 0
         self.counts = dict(frames_received=0, frames_processed=0, targets_found=0)
         self.window = collections.deque(maxlen=STATS_WINDOW)  # (latency_s, FrameResult)
         self.last_status = (time.monotonic(), 0)
@@ -176,7 +180,11 @@ class VisionNode(Node):
     def process(self, color_msg, depth_msg, arrival):
         """Validate, run the pipeline, publish target/pose (and the debug image)."""
         if self.pipeline.intrinsics is None:
-            self._reject('no_camera_info', 'frame before any camera_info')
+            self.frames_without_info += 1
+            if self.frames_without_info == NO_CAMERA_INFO_WARN_FRAMES:
+                self.get_logger().warn(
+                    f'{NO_CAMERA_INFO_WARN_FRAMES} frames and no {names.CAMERA_INFO} yet: '
+                    f'frames are dropped until it comes')
             return
         if (color_msg.encoding, depth_msg.encoding) != ('rgb8', '32FC1'):
             self._reject('encoding', f'frame encoded {color_msg.encoding!r}/'
