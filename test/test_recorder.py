@@ -12,6 +12,7 @@ from mcap_ros2.decoder import DecoderFactory
 from ros_graph import Probe, start, stop
 from uav_tilt_common import names, ros_qos
 
+pytestmark = pytest.mark.alone   # rates in real time
 RTF = 0.25              # slow enough that plant, camera and two recorders keep up on 2 cores
 RECORD_WALL_S = 8.0
 EXPECTED_TYPES = {
