@@ -15,8 +15,14 @@ $(STAMP): requirements.txt setup.py
 	$(PY) -m pip install -q --disable-pip-version-check --no-deps -e .
 	touch $(STAMP)
 
+# The tests run on every core (pytest-xdist; a test file stays on one worker, so that its
+# fixtures are built once), then the `alone` ones (wall-clock rates) one at a time; each
+# part reports its slowest tests, and `make test` fails if either part fails.
+PYTEST := $(PY) -m pytest -q -p no:cacheprovider
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider --durations=15 test
+	$(PYTEST) --durations=15 -n auto --dist loadfile -m 'not alone' test; shared=$$?; \
+	$(PYTEST) --durations=5 -m alone test; alone=$$?; \
+	[ $$shared -eq 0 ] && [ $$alone -eq 0 ]
 
 PACKAGES := uav_tilt_common uav_tilt_sim uav_tilt_control uav_tilt_vision uav_tilt_tools
 

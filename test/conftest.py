@@ -4,8 +4,22 @@ import sys
 
 import pytest
 
-# Fast DDS domain ids 0-232; the pid spreads concurrent runs on one machine apart.
-os.environ['ROS_DOMAIN_ID'] = str(os.environ.get('UAV_TILT_TEST_DOMAIN', 10 + os.getpid() % 200))
+
+def _domain_id():
+    """This test process's ROS domain (Fast DDS takes 0-232): one per run, apart from
+    other runs on the machine (by pid, or by the run's id under pytest-xdist), and one per
+    xdist worker within a run, which runs its own graphs beside the others'."""
+    if 'UAV_TILT_TEST_DOMAIN' in os.environ:
+        return int(os.environ['UAV_TILT_TEST_DOMAIN'])
+    worker = os.environ.get('PYTEST_XDIST_WORKER')
+    if worker is None:
+        return 10 + os.getpid() % 200
+    count = int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1'))
+    run = int(os.environ.get('PYTEST_XDIST_TESTRUNUID', '0'), 16)
+    return 10 + run % max(200 // count, 1) * count + int(worker.removeprefix('gw'))
+
+
+os.environ['ROS_DOMAIN_ID'] = str(_domain_id())
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('PYTHONUNBUFFERED', '1')
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

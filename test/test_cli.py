@@ -15,6 +15,7 @@ KEYS = {
 }
 
 
+@pytest.mark.alone     # speed measurements
 @pytest.mark.parametrize('what', sorted(KEYS))
 def test_bench_prints_the_contract_keys(what):
     # the graph's vision statistics need a few frames and a vision status in the window

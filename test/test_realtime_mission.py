@@ -16,6 +16,7 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_tools.recording import load_recording
 from uav_tilt_tools.report import summarize
 
+pytestmark = pytest.mark.alone   # the graph in real time keeps up only with the CPU
 LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
 MODEL = pathlib.Path(REPO) / 'models' / 'detector_int8.onnx'
 # The mission takes about 55 s of sim time; start-up and shutdown come on top.

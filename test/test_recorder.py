@@ -15,6 +15,7 @@ from ros_graph import Probe, start, stop
 from uav_tilt_common import names, ros_qos
 from uav_tilt_tools.recorder_node import output_path
 
+pytestmark = pytest.mark.alone   # rates in real time
 RTF = 0.25              # slow enough that plant, camera and two recorders keep up on 2 cores
 RECORD_WALL_S = 8.0
 EXPECTED_TYPES = {

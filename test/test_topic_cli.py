@@ -11,6 +11,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from ros_graph import REPO, Probe, start, status_values, stop
 from uav_tilt_common import names, ros_qos
 
+pytestmark = pytest.mark.alone   # `hz` measures wall rates
 RTF = 0.5
 IMU_HZ = 300
 
