@@ -25,6 +25,12 @@ os.environ.setdefault('PYTHONUNBUFFERED', '1')
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+def pytest_collection_modifyitems(items):
+    """The `slow` files first, each in its order: pytest-xdist hands the files out in this
+    order, so the long ones start at once and the short ones fill in around them."""
+    items.sort(key=lambda item: item.get_closest_marker('slow') is None)
+
+
 @pytest.fixture
 def probe():
     """An in-process ROS node recording /uav topics (see ros_graph.Probe)."""

@@ -9,6 +9,8 @@ from uav_tilt_tools import campaign as cp
 from uav_tilt_tools.task_metrics import failure_of
 from uav_tilt_tools.task_metrics import POI_BAR_M, task_results
 
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
+
 
 def test_random_draws_cover_the_stated_ranges():
     draws = [cp.random_draw(seed) for seed in range(300)]

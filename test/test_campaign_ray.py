@@ -11,6 +11,8 @@ import pytest
 
 from uav_tilt_tools import campaign as cp
 
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
+
 N, SEED = 6, 20261201
 DURATION_S = 8.0             # takeoff and the climb to the search: short runs
 WALL_CLOCK_KEYS = ('rtf', 'controller_rate_hz', 'vision_fps')

@@ -15,6 +15,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from ros_graph import REPO, status_values, stop
 from uav_tilt_common import names, ros_qos
 
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
+
 pytest.importorskip('colcon_core')
 
 # What an ament_python package install needs from the source tree.

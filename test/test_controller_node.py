@@ -9,6 +9,8 @@ from nav_msgs.msg import Odometry
 from ros_graph import Probe, start, status_values, stop
 from uav_tilt_common import names, ros_qos
 
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
+
 MISSION_MODES = ['IDLE', 'TAKEOFF', 'HOVER', 'SEARCH', 'APPROACH', 'CONTACT', 'HOLD',
                  'RETREAT', 'LAND', 'IDLE']
 # Status comes at 10 Hz: SEARCH lasts one tick with a ground-truth target and may be missed.

@@ -20,6 +20,8 @@ from uav_tilt_common import names, ros_qos
 from uav_tilt_sim.camera import CameraConfig
 from uav_tilt_tools.mission_watch import MissionWatch
 
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
+
 LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
 # The spec's shutdown limit for every node, plus the script's own bookkeeping.
 SHUTDOWN_S = 5.0 + 3.0

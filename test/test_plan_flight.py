@@ -26,7 +26,8 @@ PLAN = REPO / 'config' / 'plans' / 'inspection.yaml'
 SEEDS = np.random.default_rng().integers(0, 2**31 - 1, size=2)
 INCLINATIONS_DEG = (0.0, 20.0)
 
-pytestmark = pytest.mark.skipif(not MODEL.is_file(), reason='no committed detector weights')
+pytestmark = [pytest.mark.skipif(not MODEL.is_file(), reason='no committed detector weights'),
+              pytest.mark.slow]     # minutes of missions: handed out first
 
 
 def _world(inclination_deg, seed):

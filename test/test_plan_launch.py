@@ -7,8 +7,12 @@ import json
 import os
 import subprocess
 
+import pytest
+
 from ros_graph import REPO
 from uav_tilt_tools import report
+
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
 
 LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
 SCENARIO = os.path.join(REPO, 'config', 'scenarios', 'plan.yaml')

@@ -108,7 +108,8 @@ def _plate_pois(scenario):
             + normal * PANEL_THICKNESS_M for o in scenario.objects if o.cls == 'bolt_plate']
 
 
-pytestmark = pytest.mark.skipif(not MODEL.is_file(), reason='no committed detector weights')
+pytestmark = [pytest.mark.skipif(not MODEL.is_file(), reason='no committed detector weights'),
+              pytest.mark.slow]     # minutes of missions: handed out first
 
 
 def test_a_target_out_of_view_at_takeoff_is_searched_for_and_inspected(flights):

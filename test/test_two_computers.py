@@ -16,6 +16,8 @@ from ros_graph import REPO
 from uav_tilt_common import names
 from uav_tilt_tools import recording
 
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
+
 LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
 # Names and a /24 of this run's own (ip names: at most 15 characters).
 TAG = os.getpid() % 100000

@@ -11,6 +11,8 @@ from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.inprocess import camera_vision, run_mission
 
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
+
 MODEL = pathlib.Path(__file__).resolve().parent.parent / 'models' / 'detector_int8.onnx'
 
 

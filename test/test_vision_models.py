@@ -29,6 +29,8 @@ from uav_tilt_vision.pipeline import VisionPipeline
 from uav_tilt_vision.target_pose import CameraIntrinsics
 from uav_tilt_vision.train import card_path, predict_set, world_groups
 
+pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
+
 torch.set_num_threads(2)
 
 MODELS = Path(__file__).resolve().parent.parent / 'models'
