@@ -90,3 +90,15 @@ def test_an_address_without_a_cluster_is_one_line(tmp_path, address, code, words
     said = [line for line in out.stderr.splitlines() if line.startswith('uav-tilt campaign:')]
     assert out.returncode == code and 'Traceback' not in out.stderr, out.stderr
     assert len(said) == 1 and words in said[0], out.stderr
+
+
+def test_a_local_ray_that_cannot_start_is_one_line(tmp_path):
+    # Ray's sockets go under TMPDIR, and a socket's path is at most 107 bytes
+    deep = tmp_path / ('d' * 100)
+    deep.mkdir()
+    out = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.cli', 'campaign', '--n', '1',
+                          '--backend', 'ray'], cwd=tmp_path, capture_output=True, text=True,
+                         env=dict(os.environ, TMPDIR=str(deep)), timeout=120)
+    said = [line for line in out.stderr.splitlines() if line.startswith('uav-tilt campaign:')]
+    assert out.returncode == 1 and 'Traceback' not in out.stderr, out.stderr
+    assert len(said) == 1 and 'cannot start a local Ray' in said[0], out.stderr

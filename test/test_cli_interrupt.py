@@ -2,9 +2,12 @@
 as `kill` or `timeout` send it) end a `uav-tilt` command with one line and exit code 130,
 leaving no worker process and no temporary folder behind."""
 import os
+import pathlib
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 import pytest
@@ -13,6 +16,7 @@ from ros_graph import REPO, alive
 
 FLY = ['fly', '--scenario', 'config/scenarios/default.yaml', '--target-source', 'ground_truth']
 CAMPAIGN = ['campaign', '--n', '2', '--workers', '1', '--duration', '60']
+RAY_CAMPAIGN = [*CAMPAIGN, '--backend', 'ray']
 
 
 def children(pid):
@@ -28,17 +32,23 @@ def children(pid):
     return found
 
 
-def started(tmp_path, args):
-    """`uav-tilt ARGS` with its own TMPDIR, SIGINT at its default (a terminal's foreground
+@pytest.fixture
+def tmp():
+    """A TMPDIR of a short path (Ray's sockets go under it: at most 107 bytes)."""
+    path = pathlib.Path(tempfile.mkdtemp(prefix='uavt', dir='/tmp'))
+    yield path
+    shutil.rmtree(path, ignore_errors=True)
+
+
+def started(tmp, args):
+    """`uav-tilt ARGS` with TMPDIR ``tmp``, SIGINT at its default (a terminal's foreground
     job has it so even when the tests run as a background job, which starts with it
-    ignored); returns once a run's temporary folder is there."""
-    tmp = tmp_path / 'tmp'
-    tmp.mkdir()
+    ignored)."""
     proc = subprocess.Popen([sys.executable, '-m', 'uav_tilt_tools.cli', *args], cwd=REPO,
                             env=dict(os.environ, TMPDIR=str(tmp)), process_group=0,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    return proc, tmp
+    return proc
 
 
 def wait_for(predicate, timeout_s):
@@ -49,12 +59,13 @@ def wait_for(predicate, timeout_s):
 
 
 @pytest.mark.parametrize('args, how', [(FLY, 'ctrl-c'), (CAMPAIGN, 'ctrl-c'),
-                                       (CAMPAIGN, 'sigterm')],
-                         ids=['fly-ctrl-c', 'campaign-ctrl-c', 'campaign-sigterm'])
-def test_an_interrupted_command_is_one_line_and_leaves_nothing(tmp_path, args, how):
-    proc, tmp = started(tmp_path, [*args, *(['--out', str(tmp_path / 'out')]
-                                            if args is CAMPAIGN else [])])
-    if args is CAMPAIGN:    # a worker is flying its run in its temporary folder
+                                       (CAMPAIGN, 'sigterm'), (RAY_CAMPAIGN, 'sigterm')],
+                         ids=['fly-ctrl-c', 'campaign-ctrl-c', 'campaign-sigterm',
+                              'ray-campaign-sigterm'])
+def test_an_interrupted_command_is_one_line_and_leaves_nothing(tmp_path, tmp, args, how):
+    campaign = args[0] == 'campaign'
+    proc = started(tmp, [*args, *(['--out', str(tmp_path / 'out')] if campaign else [])])
+    if campaign:            # a worker is flying its run in its temporary folder
         assert wait_for(lambda: any(p.name.startswith('uav_tilt_run_') for p in tmp.iterdir())
                         or proc.poll() is not None, 120.0)
     else:                   # flying, well past the imports

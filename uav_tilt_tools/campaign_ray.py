@@ -10,6 +10,7 @@ campaign as it would locally.
 """
 import logging
 import os
+import signal
 import socket
 
 from uav_tilt_common.config import ConfigError
@@ -18,6 +19,7 @@ MAX_RETRIES = 3
 OBJECT_STORE_BYTES = 256 * 2**20    # results are kB, recordings ~10 MB, fetched at once
 # ray.init keeps trying an address that does not answer; a campaign says so instead
 CONNECT_TIMEOUT_S = 10.0
+CANCEL_WAIT_S = 5.0
 
 
 class CampaignError(RuntimeError):
@@ -36,10 +38,14 @@ def ray_runs(run_one, jobs, workers=None, address=None):
     if started:
         # campaigns run on clusters without internet access: no usage reports
         os.environ.setdefault('RAY_USAGE_STATS_ENABLED', '0')
+        # ray.init takes SIGTERM (it exits with a stack dump): the command's own handler
+        # ends the campaign as Ctrl-C does, through the clean-up below
+        on_term = signal.getsignal(signal.SIGTERM)
         if address is not None:
             _connect(ray, address)
         else:
             _init_local(ray, workers or os.cpu_count() or 1)
+        signal.signal(signal.SIGTERM, on_term)
     task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(run_one)
     pending = {task.options(name=f'campaign run {job["index"]}').remote(job): job['index']
                for job in jobs}
@@ -56,8 +62,12 @@ def ray_runs(run_one, jobs, workers=None, address=None):
                                     f'{type(err).__name__}') from None
             yield result
     finally:
+        # a cancelled task leaves by KeyboardInterrupt, removing its run's temporary folder;
+        # what has not left after CANCEL_WAIT_S goes with the shutdown
         for ref in pending:
-            ray.cancel(ref, force=True)
+            ray.cancel(ref)
+        if pending:
+            ray.wait(list(pending), num_returns=len(pending), timeout=CANCEL_WAIT_S)
         if started:
             ray.shutdown()
 
@@ -91,6 +101,8 @@ def _init_local(ray, cpus):
     try:
         ray.init(num_cpus=cpus, include_dashboard=False, object_store_memory=OBJECT_STORE_BYTES,
                  logging_level=logging.WARNING)
+    except OSError as err:      # e.g. its sockets' paths under a long TMPDIR
+        raise CampaignError(f'cannot start a local Ray: {err}') from None
     finally:
         if before is None:
             del os.environ['PYTHONPATH']
