@@ -135,7 +135,9 @@ def test_a_tick_whose_answer_is_lost_is_sent_again(tmp_path, probe):
         code, _ = stop(plant)
     dropped = [t for s, t in heard if s == drop_ns]
     assert len(dropped) >= 2
-    assert dropped[1] - dropped[0] < RESEND_PERIOD_S + 0.5
+    # sent again after RESEND_PERIOD_S, well before lockstep_timeout_s (5 s); the slack is
+    # this process's own delay on a loaded machine
+    assert dropped[1] - dropped[0] < RESEND_PERIOD_S + 1.5
     status = latest_status(probe)
     assert int(status['lockstep_timeouts']) == 0 and int(status['resent_ticks']) >= 1, status
     assert code == 0
