@@ -218,6 +218,10 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
         assert 0 <= frames_published - len(frames) <= lost_frames, (topic, frames_published)
     ticks = round(duration_s * 300) + 1
     assert (1 - LOST_SHARE) * ticks <= len(set(clock)) <= ticks
+    # the controller's answers from the first tick: it answers once the recorder listens
+    commands = stamps['/uav/' + names.ACTUATORS_CMD]
+    assert min(commands) <= 1.5 / 300
+    assert len(set(commands)) >= (1 - LOST_SHARE) * ticks
     # Log times are sim time: inside the span of the messages' stamps, give or take the
     # ticks lost in transport (the recorder's clock may have heard a /clock that its
     # recording subscription lost, or had not stored yet at shutdown)

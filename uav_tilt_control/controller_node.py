@@ -60,9 +60,9 @@ class ControllerNodeConfig(ControllerConfig):
         doc="the plant's IMU rate: the period of a tick without a usable previous stamp, "
             'and the wall-clock period the jitter is measured against in realtime')
     hold_until_recorded: bool = param(
-        False, doc='autostart once the recorder subscribes to controller/status, so that '
-        f'the recording has the whole mission; at most {names.RECORDER_WAIT_S:.0f} s of '
-        'wall time')
+        False, doc='answer the first tick and autostart once the recorder subscribes to '
+        'controller/status and actuators/cmd, so that the recording has the whole mission; '
+        f'at most {names.RECORDER_WAIT_S:.0f} s of wall time')
 
 
 class ControllerNode(Node):
@@ -259,6 +259,9 @@ class ControllerNode(Node):
         if not (self._frame_ok(frame, names.FRAME_BASE, 'imu')
                 and self._finite([*gyro, *accel], 'imu')):
             return
+        if self.core.autostart_held:
+            # hold_until_recorded: unanswered, the lockstep plant sends the tick again
+            return
         if stamp_ns == self.last_stamp_ns:
             # the plant re-sent a tick it is still waiting on: answer it again
             self.pub_cmd.publish(self.last_cmd)
@@ -281,15 +284,16 @@ class ControllerNode(Node):
 
     # --- status -------------------------------------------------------------------------
     def _release_autostart(self):
-        """hold_until_recorded: let the autostart go once the recorder listens to
-        controller/status (its subscription matched; other subscribers, a probe or a
-        viewer, do not count), or the wait is over."""
-        if recorder_listens(self, self.pub_status):
+        """hold_until_recorded: answer ticks and let the autostart go once the recorder
+        listens to controller/status and actuators/cmd (its subscriptions matched; other
+        subscribers, the plant, a probe or a viewer, do not count), or the wait is over."""
+        if all(recorder_listens(self, pub) for pub in (self.pub_status, self.pub_cmd)):
             self.core.autostart_held = False
         elif time.monotonic() - self.wall_t0 >= names.RECORDER_WAIT_S:
             self.core.autostart_held = False
             self.get_logger().warn(f'hold_until_recorded: no recorder on controller/status '
-                                   f'after {names.RECORDER_WAIT_S:.0f} s; starting anyway')
+                                   f'and actuators/cmd after {names.RECORDER_WAIT_S:.0f} s; '
+                                   f'starting anyway')
 
     def on_status(self):
         """controller/status: mode, mission, saturation, rejected inputs, loop statistics;
