@@ -174,11 +174,16 @@ def test_vision_rate_and_latency_come_from_vision_status():
         pose.pose.covariance[0] = -1.0 if k % 3 == 0 else 0.01
         rec[names.CAMERA_INFO].append((int(tk * 1e9), info))
         rec[names.TARGET_POSE].append((int(tk * 1e9) + 10_000_000, pose))
-    for fps, p95 in ((11.0, 30.0), (12.5, 21.0)):
+    # over the run: none while the detector loads, then 29-31 fps, then two statuses sent
+    # as the graph stops, over part of a window
+    rates = [(0.0, 0.0)] + [(30.0 + k % 3 - 1, 20.0 + k % 3) for k in range(20)] + \
+        [(2.0, 90.0), (0.0, 0.0)]
+    for k, (fps, p95) in enumerate(rates):
         rec[names.VISION_STATUS].append((0, ros_msgs.diagnostics_msg(
-            'vision', dict(fps=fps, latency_ms_p95=p95, frames_processed=10), stamp(1.0))))
+            'vision', dict(fps=fps, latency_ms_p95=p95, frames_processed=10),
+            stamp(0.5 * k))))
     summary = report.summarize(rec, TOOL_X)
-    assert summary['vision_fps'] == 12.5 and summary['vision_latency_ms_p95'] == 21.0
+    assert summary['vision_fps'] == 30.0 and summary['vision_latency_ms_p95'] == 21.0
     t, seen = recording.detections(rec)
     assert seen.sum() == 20
     _, latency = recording.frame_latencies_ms(rec)

@@ -12,11 +12,14 @@ has, measured on the wall clock:
   percentile of image arrival -> pose publication in vision (vision/status ``fps``,
   ``latency_ms_p95``).
 
-Each is the value of the last status recorded; null when that status is not recorded.
+Each is the median over the statuses recorded (a node's last status may cover a part
+window only, one sent as the graph stops); null when that status is not recorded.
 """
 import json
 import os
 import sys
+
+import numpy as np
 
 from uav_tilt_common import names
 from uav_tilt_common.vehicle import VehicleParams
@@ -69,12 +72,19 @@ def real_time_factor(plant_statuses):
     return (spans[-1][0] - spans[0][0]) / (spans[-1][1] - spans[0][1])
 
 
+def median_of(statuses, key):
+    """The median of ``key`` over the (time, values) statuses that give it a number, or
+    None."""
+    numbers = [json_number(values.get(key)) for _, values in statuses]
+    numbers = [x for x in numbers if x is not None]
+    return float(np.median(numbers)) if numbers else None
+
+
 def summarize(rec, tool_tip_x_m):
     """The summary.json dict (SUMMARY_KEYS); null where the recording lacks the data."""
     ctrl = recording.statuses(rec, names.CONTROLLER_STATUS)
     last = ctrl[-1][1] if ctrl else {}
     vision = recording.statuses(rec, names.VISION_STATUS)
-    vision_last = vision[-1][1] if vision else {}
     t_push, push, _ = recording.contact_forces(rec)
     t_tip, tips = recording.tool_tips(rec, tool_tip_x_m)
     target = recording.target_pose(rec)
@@ -83,9 +93,9 @@ def summarize(rec, tool_tip_x_m):
                               else (None, None))
     summary.update(
         rtf=real_time_factor(recording.statuses(rec, names.PLANT_STATUS)),
-        controller_rate_hz=last.get('loop_rate_hz'),
-        vision_fps=vision_last.get('fps'),
-        vision_latency_ms_p95=vision_last.get('latency_ms_p95'))
+        controller_rate_hz=median_of(ctrl, 'loop_rate_hz'),
+        vision_fps=median_of(vision, 'fps'),
+        vision_latency_ms_p95=median_of(vision, 'latency_ms_p95'))
     with_tasks(summary, task_summaries(rec, tool_tip_x_m))
     summary['failure'] = recorded_failure(summary, ctrl)
     return {k: summary[k] if k in MISSION_KEYS + ('tasks', 'failure')
