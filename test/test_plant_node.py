@@ -254,3 +254,5 @@ def test_the_realtime_warning_names_only_what_went_wrong():
     slow = realtime_reason(0.5, 1.0, 0, 12, 5.0)
     assert 'not keeping up with the wall clock: sim time at 0.50x (target 1x)' in slow
     assert '12 ticks dropped' in slow and 'commands' not in slow
+    assert realtime_reason(1.0, 1.0, 1, 1, 5.0) == \
+        '1 tick dropped; 1 command came after the next tick had started in the last 5 s'

@@ -29,6 +29,10 @@ def test_a_missing_scenario_is_one_line_naming_the_parameter(path):
         load_scenario(path)
     message = str(err.value)
     assert '\n' not in message and "'scenario_file'" in message and 'no such file' in message
+    # where it was looked for, each place once (from the checkout, the working directory is
+    # the share folder)
+    looked = message.split('no such file (')[1].rstrip(')').split(' or ')
+    assert len(looked) == len(set(looked)) >= 1
 
 
 def test_a_folder_given_for_a_file_is_named_so(tmp_path):

@@ -44,7 +44,10 @@ def candidates(path: str | os.PathLike[str]) -> list[pathlib.Path]:
     """Where ``path`` may be: itself when absolute, else in the working directory, then in
     :func:`share_dir`."""
     path = pathlib.Path(os.path.expanduser(str(path)))
-    return [path] if path.is_absolute() else [pathlib.Path.cwd() / path, share_dir() / path]
+    if path.is_absolute():
+        return [path]
+    # run from the checkout, the working directory is the share folder: one place
+    return list(dict.fromkeys([pathlib.Path.cwd() / path, share_dir() / path]))
 
 
 def locate(path: str | os.PathLike[str]) -> pathlib.Path:

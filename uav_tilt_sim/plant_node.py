@@ -407,9 +407,10 @@ def realtime_reason(rtf, target_rtf, late_commands, dropped_ticks, window_s):
         parts.append(f'not keeping up with the wall clock: sim time at {rtf:.2f}x '
                      f'(target {target_rtf:g}x)')
     if dropped_ticks:
-        parts.append(f'{dropped_ticks} ticks dropped')
+        parts.append(f'{dropped_ticks} tick{"s" * (dropped_ticks != 1)} dropped')
     if late_commands:
-        parts.append(f'{late_commands} commands came after the next tick had started')
+        parts.append(f'{late_commands} command{"s" * (late_commands != 1)} came after the '
+                     f'next tick had started')
     return '; '.join(parts) + f' in the last {window_s:.0f} s' if parts else ''
 
 

@@ -76,7 +76,7 @@ def bench_slide(seed=0, directions=('up',), workers=None):
 
 def main(argv=None):
     """Print the benchmark's JSON."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--directions', nargs='+', choices=sorted(LINES_UV_M), default=['up'])
     parser.add_argument('--workers', type=int, default=None)
