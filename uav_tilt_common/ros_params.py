@@ -31,8 +31,7 @@ _ARRAY_TYPES: dict[type | None, Parameter.Type] = {
 
 
 def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
-                   on_change: Callable[[dict[str, Any]], None] | None = None,
-                   argv: list[str] | None = None) -> ConfigT:
+                   on_change: Callable[[dict[str, Any]], None] | None = None) -> ConfigT:
     """Declare every field of config ``cls`` as a parameter with a descriptor (description,
     unit, range, choices) and return the validated config.
 
@@ -41,8 +40,8 @@ def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
     config, and ``on_change({name: value})`` is called. Every other parameter is read-only,
     so a change is refused with the reason. Raises ConfigError: one line naming the
     parameter, its value and what is allowed (a wrong type included), a parameter given that
-    the node does not declare (:func:`check_overrides`), or a parameters file in ``argv``
-    (the process's arguments by default) that misses the node (:func:`check_params_files`).
+    the node does not declare (:func:`check_overrides`), or a parameters file among the
+    process's arguments that misses the node (:func:`check_params_files`).
     """
     fields = fields_flat(cls)
     values: dict[str, Any] = {}
@@ -64,7 +63,7 @@ def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
     if dynamic:
         _watch_changes(node, cls, cfg, set(dynamic), on_change)
     check_overrides(node)
-    check_params_files(node, params_files(sys.argv if argv is None else argv))
+    check_params_files(node, params_files(sys.argv))
     return cfg
 
 
