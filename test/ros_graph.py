@@ -30,6 +30,21 @@ def alive(pid):
         return False
 
 
+def children(pid):
+    """pid -> command line of the processes whose parent is ``pid``."""
+    found = {}
+    for entry in os.listdir('/proc'):
+        try:
+            with open(f'/proc/{entry}/stat') as stream:
+                ppid = int(stream.read().rsplit(')', 1)[1].split()[1])
+            if ppid == pid:
+                with open(f'/proc/{entry}/cmdline', 'rb') as stream:
+                    found[int(entry)] = stream.read().replace(b'\0', b' ').decode()
+        except (OSError, ValueError, IndexError):
+            continue        # not a process, or it is gone already
+    return found
+
+
 def stop(proc, timeout_s=5.0):
     """SIGINT a process and return (exit code, seconds it took); kill it if it hangs."""
     if proc.poll() is not None:

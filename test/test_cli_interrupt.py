@@ -12,24 +12,11 @@ import time
 
 import pytest
 
-from ros_graph import REPO, alive
+from ros_graph import REPO, alive, children
 
 FLY = ['fly', '--scenario', 'config/scenarios/default.yaml', '--target-source', 'ground_truth']
 CAMPAIGN = ['campaign', '--n', '2', '--workers', '1', '--duration', '60']
 RAY_CAMPAIGN = [*CAMPAIGN, '--backend', 'ray']
-
-
-def children(pid):
-    """The pids whose parent is ``pid``."""
-    found = []
-    for entry in os.listdir('/proc'):
-        try:
-            with open(f'/proc/{entry}/stat') as stream:
-                if int(stream.read().rsplit(')', 1)[1].split()[1]) == pid:
-                    found.append(int(entry))
-        except (OSError, ValueError, IndexError):
-            continue
-    return found
 
 
 @pytest.fixture

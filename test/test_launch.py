@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from ros_graph import REPO, alive, status_values
+from ros_graph import REPO, alive, children, status_values
 from uav_tilt_common import names, ros_qos
 from uav_tilt_sim.camera import CameraConfig
 from uav_tilt_tools.mission_watch import MissionWatch
@@ -27,21 +27,6 @@ LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
 SHUTDOWN_S = 5.0 + 3.0
 # The share of messages a recorded lockstep mission may lose (see the test).
 LOST_SHARE = 0.005
-
-
-def children(pid):
-    """pid -> command line of the processes whose parent is ``pid``."""
-    found = {}
-    for entry in os.listdir('/proc'):
-        try:
-            with open(f'/proc/{entry}/stat') as stream:
-                ppid = int(stream.read().rsplit(')', 1)[1].split()[1])
-            if ppid == pid:
-                with open(f'/proc/{entry}/cmdline', 'rb') as stream:
-                    found[int(entry)] = stream.read().replace(b'\0', b' ').decode()
-        except (OSError, ValueError, IndexError):
-            continue        # not a process, or it is gone already
-    return found
 
 
 def report(run_dir):
