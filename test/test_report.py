@@ -4,6 +4,7 @@ import argparse
 import json
 import math
 import shutil
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -244,6 +245,36 @@ def test_report_command_reads_the_mcap_and_writes_summary_and_plots(tmp_path, ca
     # No actuator or vision topics were recorded: those plots are left out.
     assert not (tmp_path / 'actuators.png').exists()
     assert not (tmp_path / 'vision.png').exists()
+
+
+def test_the_camera_images_are_not_held_in_memory_while_reading(tmp_path):
+    """A recording is mostly camera images, which the report does not read: they pass
+    through one chunk at a time, so reading peaks at a few chunks, not at the file's size.
+    (Iterating a whole file in file order through the MCAP library's seeking reader queues
+    every message of the file before the first is yielded.)"""
+    rec, _ = synthetic_recording(np.full(N, 5.5))
+    image_bytes, chunk_bytes = 1 << 19, 1 << 20
+    images = {int(k * N / 64): k for k in range(64)}      # 64 images of 0.5 MiB: 32 MiB
+    rng = np.random.default_rng()
+    bag = open_bag(tmp_path / 'recording.mcap', chunk_bytes=chunk_bytes)
+    bag.add_topic('/uav/' + names.CAMERA_COLOR, 'sensor_msgs/msg/Image')
+    for i, (log_ns, topic, msg) in enumerate(in_time_order(rec)):
+        write(bag, topic, msg, log_ns)
+        if i in images:     # random pixels: zstd cannot shrink them
+            pixels = rng.integers(0, 256, (256, 683, 3), np.uint8)       # >= 0.5 MiB
+            write(bag, names.CAMERA_COLOR, ros_msgs.image_msg(pixels, stamp(0.0)), log_ns)
+    bag.close()
+    assert (tmp_path / 'recording.mcap').stat().st_size > 64 * image_bytes
+    tracemalloc.start()
+    try:
+        loaded = recording.load_recording(str(tmp_path))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert names.CAMERA_COLOR not in loaded
+    assert {t: len(m) for t, m in loaded.items()} == {t: len(m) for t, m in rec.items()}
+    # the decoded messages (a few MiB) and a chunk or two in flight; the file is 32 MiB
+    assert peak < 12 * chunk_bytes, peak
 
 
 def test_the_report_exits_0_only_for_a_run_that_met_the_bar(tmp_path, capsys):

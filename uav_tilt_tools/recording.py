@@ -97,13 +97,15 @@ def _read_mcap(path, absolute, under, rec):
                           f'magic)')
         stream.seek(0)
         try:
-            summary, complete = make_reader(stream).get_summary(), True
+            make_reader(stream).get_summary()
+            complete = True
         except TORN_TAIL:       # no footer where it belongs
-            summary, complete = None, False
+            complete = False
         stream.seek(0)
-        reader = make_reader(stream) if summary is not None else NonSeekingReader(stream)
-        messages = reader.iter_messages(topics=None if prefixes else list(absolute),
-                                        log_time_order=False)
+        # read in file order, one chunk at a time: the seeking reader's file-order iteration
+        # reads every chunk (the images too) before it yields the first message
+        messages = NonSeekingReader(stream).iter_messages(
+            topics=None if prefixes else list(absolute), log_time_order=False)
         while True:
             try:
                 schema, channel, message = next(messages)
