@@ -2,6 +2,7 @@
 resumed with --resume finishes with every run once, --record keeps one MCAP per run."""
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -91,6 +92,40 @@ def test_a_plan_resumes_however_its_path_is_written(tmp_path):
     result = cp.campaign(1, SEED, duration_s=0.1, progress=False, out=tmp_path, resume=True,
                          **relative)
     assert result['n'] == 1
+
+
+def test_a_resume_refuses_a_plan_or_scenario_edited_since_the_campaign_began(tmp_path):
+    """The runs kept flew the files' earlier contents: resuming on edited ones would mix two
+    campaigns under one result."""
+    config = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                          'config')
+    files = {}
+    for key, source in (('plan_file', os.path.join(config, 'plans', 'inspection.yaml')),
+                        ('scenario_file', os.path.join(config, 'scenarios', 'plan.yaml'))):
+        files[key] = str(tmp_path / os.path.basename(source))
+        shutil.copy(source, files[key])
+    out = tmp_path / 'out'
+    cp.campaign(1, SEED, duration_s=0.1, progress=False, out=out, **files)
+    for path in files.values():
+        with open(path, encoding='utf-8') as stream:
+            original = stream.read()
+        with open(path, 'a', encoding='utf-8') as stream:
+            stream.write('# edited\n')
+        with pytest.raises(ConfigError, match=f'{path} has changed since the campaign'):
+            cp.campaign(1, SEED, duration_s=0.1, progress=False, out=out, resume=True, **files)
+        with open(path, 'w', encoding='utf-8') as stream:
+            stream.write(original)
+    assert cp.campaign(1, SEED, duration_s=0.1, progress=False, out=out, resume=True,
+                       **files)['n'] == 1
+    # a store written before the digests were kept resumes as it did
+    args_path = out / 'campaign_args.json'
+    args = json.loads(args_path.read_text())
+    assert {k for k in args if k.endswith('_sha256')} == {
+        'plan_file_sha256', 'scenario_file_sha256'}
+    args_path.write_text(json.dumps({k: v for k, v in args.items()
+                                     if not k.endswith('_sha256')}))
+    assert cp.campaign(1, SEED, duration_s=0.1, progress=False, out=out, resume=True,
+                       **files)['n'] == 1
 
 
 def test_a_damaged_store_is_refused_and_keeps_its_runs(tmp_path):

@@ -227,12 +227,13 @@ def campaign(n, seed, workers=None, target_source='ground_truth', duration_s=Non
                    scenario_file, corners)
     store = None
     if out is not None:
-        from uav_tilt_tools.campaign_store import RunStore
-        # files as the same path however written ('./a.yaml', 'a.yaml', absolute), for the
-        # resume
+        from uav_tilt_tools.campaign_store import RunStore, file_digests
+        # files as the same path however written ('./a.yaml', 'a.yaml', absolute), and what
+        # they hold, for the resume
         args = dict(n=n, seed=seed, target_source=target_source, duration_s=duration_s,
                     plan_file=plan_file and os.path.realpath(plan_file),
-                    scenario_file=scenario_file and os.path.realpath(scenario_file))
+                    scenario_file=scenario_file and os.path.realpath(scenario_file),
+                    **file_digests(plan_file=plan_file, scenario_file=scenario_file))
         if corners:     # only then, so that folders of earlier campaigns still resume
             args['corners'] = True
         store = RunStore(out, args, resume)

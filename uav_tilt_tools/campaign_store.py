@@ -1,12 +1,14 @@
 """The ``--out DIR`` of a campaign: what it is, and every run as it finishes.
 
-- ``DIR/campaign_args.json``: n, seed, target_source, duration_s (a resume must match);
+- ``DIR/campaign_args.json``: n, seed, target_source, duration_s, the plan and scenario
+  files and their contents' SHA-256 (a resume must match);
 - ``DIR/runs.jsonl``: one JSON line per finished run (the run's dict of the campaign JSON),
   appended and synced to disk as each run finishes, so an interrupted campaign keeps them;
 - ``DIR/run_NNNN/recording.mcap`` with ``--record`` (written before the run's line, so a
   line means its recording is complete); ``uav-tilt report DIR/run_NNNN`` reads it;
 - ``DIR/campaign.json``: the campaign JSON once every run is in.
 """
+import hashlib
 import json
 import os
 
@@ -17,11 +19,45 @@ ARGS_FILE = 'campaign_args.json'
 RUNS_FILE = 'runs.jsonl'
 RESULT_FILE = 'campaign.json'
 BAG_NAME = 'recording.mcap'
+DIGEST = '_sha256'          # campaign_args.json: FILE_KEY + DIGEST is FILE_KEY's digest
+
+
+def file_digests(**paths):
+    """``{NAME_sha256: hex digest of the file's contents}`` for each NAME=path given (None:
+    left out), so that a resume notices an edited file (ConfigError when one is
+    unreadable)."""
+    digests = {}
+    for name, path in paths.items():
+        if path is None:
+            continue
+        try:
+            with open(path, 'rb') as stream:
+                digests[name + DIGEST] = hashlib.sha256(stream.read()).hexdigest()
+        except OSError as err:
+            raise ConfigError(f'{path}: unreadable ({err.strerror})') from None
+    return digests
 
 
 def run_dir(out_dir, index):
     """The folder of run ``index``'s recording."""
     return os.path.join(out_dir, f'run_{index:04d}')
+
+
+def _check_same_campaign(out_dir, found, args):
+    """ConfigError unless the campaign ``found`` in ``out_dir`` is the one of ``args``. An
+    edited file is named as such (the runs kept flew its earlier contents); a store from
+    before the digests were kept has none to compare."""
+    def without_digests(values):
+        return {k: v for k, v in values.items() if not k.endswith(DIGEST)}
+
+    if not isinstance(found, dict) or without_digests(found) != without_digests(args):
+        raise ConfigError(f'{out_dir} holds the campaign {without_digests(found)}, not '
+                          f'{without_digests(args)}')
+    for key, digest in args.items():
+        if key.endswith(DIGEST) and found.get(key, digest) != digest:
+            raise ConfigError(f'{args[key[:-len(DIGEST)]]} has changed since the campaign in '
+                              f'{out_dir} began (its runs flew the earlier contents): put it '
+                              f'back to resume, or start another campaign (--out)')
 
 
 class RunStore:
@@ -42,8 +78,7 @@ class RunStore:
             except (OSError, ValueError) as err:
                 raise ConfigError(f'{args_path}: unreadable ({err}); not a campaign to '
                                   f'resume') from None
-            if found != args:
-                raise ConfigError(f'{self.out_dir} holds the campaign {found}, not {args}')
+            _check_same_campaign(self.out_dir, found, args)
         elif os.path.exists(self.runs_path) and os.path.getsize(self.runs_path) and not resume:
             raise ConfigError(f'{self.runs_path} already holds runs: --resume continues that '
                               f'campaign, or choose another --out')
