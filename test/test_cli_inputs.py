@@ -5,7 +5,7 @@ import pytest
 import yaml
 
 from uav_tilt_tools import cli
-from uav_tilt_tools.fly import fly
+from uav_tilt_tools.fly import check_world, fly
 from uav_tilt_tools.report import SUMMARY_KEYS
 from uav_tilt_sim.scenario import load_scenario
 
@@ -50,6 +50,27 @@ def test_a_bad_scenario_file_is_one_line(tmp_path, capsys, scenario, words):
     assert code == 2 and out == '' and len(err) == 1, err
     assert err[0].startswith('uav-tilt fly:') and all(w in err[0] for w in words), err
     assert 'root:' not in err[0] and '[1, 2]' not in err[0]    # the file is not repeated
+
+
+def test_a_start_in_the_wall_is_one_line(tmp_path, capsys):
+    """The tool reaches tool_tip_x_m = 0.45 m ahead: facing a wall 0.3 m away it is in it.
+    Refused before anything flies (was: takeoff_timeout after 34 s)."""
+    for name in ('default', 'plan'):
+        scenario = yaml.safe_load(open(f'config/scenarios/{name}.yaml', encoding='utf-8'))
+        wall_x = scenario['wall']['position_m'][0]
+        scenario.update(start_xyz_m=[wall_x - 0.3, 0.0, 0.0], start_yaw_deg=0.0)
+        path = written(tmp_path, f'{name}.yaml', scenario)
+        argv = (['fly', '--scenario', path, '--target-source', 'ground_truth'] if name ==
+                'default' else ['campaign', '--n', '1', '--scenario', path, '--plan',
+                                'config/plans/inspection.yaml'])
+        code, out, err = refusal(capsys, argv)
+        assert code == 2 and out == '' and len(err) == 1, err
+        assert err[0].startswith(f'uav-tilt {argv[0]}:') and all(
+            w in err[0] for w in ("'start_xyz_m'", 'in the wall', '0.45 m ahead')), err
+        # turned away, the same start is clear of the wall (the hub reaches 0.08 m)
+        scenario['start_yaw_deg'] = 180.0
+        written(tmp_path, f'{name}.yaml', scenario)
+        check_world(load_scenario(path))
 
 
 @pytest.mark.parametrize('plan, words', [

@@ -8,6 +8,8 @@ from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario, target_ids
+from uav_tilt_sim.vehicle_body import HUB_HALF_EXTENTS_M
+from uav_tilt_sim.world import WALL_THICKNESS_M
 
 SCENARIOS = sorted((pathlib.Path(__file__).parent.parent / 'config' / 'scenarios')
                    .glob('*.yaml'))
@@ -83,6 +85,47 @@ def test_a_start_behind_the_wall_or_an_object_off_it_is_rejected():
             check_scenario(scenario(start, u_m=1.02 * edge_u))
         with pytest.raises(ConfigError, match=r"'objects\[0\]\.v_m' .* above the wall"):
             check_scenario(scenario(start, v_m=1.02 * height_m))
+
+
+def test_a_start_in_the_wall_is_refused_and_one_clear_of_it_is_built():
+    """The vehicle collides with the wall through its hub (a box about base_link) and its
+    tool's tip sphere, tool_tip_x_m ahead. A start that puts either into the wall, or the
+    tool through it, is refused with one line (PyBullet would throw the vehicle out, or it
+    could not take off); one clear of it is built. Vertical walls, any heading."""
+    rng = np.random.default_rng()
+    vehicle = PlantCoreConfig().vehicle
+    hx, hy, _ = HUB_HALF_EXTENTS_M
+    seen = {'clear': 0, 'in': 0, 'through': 0}     # through: the tip behind the wall's back
+    while min(seen.values()) < 3:
+        wall_yaw_deg = rng.uniform(-180, 180)
+        # the heading off the wall's normal: often straight at it
+        off_rad = rng.choice([rng.uniform(-0.3, 0.3), rng.uniform(-np.pi, np.pi)])
+        distance_m = rng.uniform(0.02, 0.7)         # base_link to the wall's face
+        reach_m = max((vehicle.tool_tip_x_m - vehicle.tool_tip_radius_m) * np.cos(off_rad)
+                      + vehicle.tool_tip_radius_m,
+                      hx * abs(np.cos(off_rad)) + hy * abs(np.sin(off_rad)))
+        if abs(reach_m - distance_m) < 2e-3:
+            continue                                # within PyBullet's contact margin
+        heading = np.radians(wall_yaw_deg)
+        facing = np.array([np.cos(heading), np.sin(heading)])
+        position_m = rng.uniform(-3, 3, 2)
+        start = position_m - distance_m * facing + rng.uniform(-1, 1) * facing[::-1] * [-1, 1]
+        scenario = from_dict(Scenario, {
+            'start_xyz_m': [*map(float, start), 0.0],
+            'start_yaw_deg': float(np.degrees(np.arctan2(np.sin(heading + off_rad),
+                                                         np.cos(heading + off_rad)))),
+            'wall': {'position_m': position_m.tolist(), 'yaw_deg': float(wall_yaw_deg),
+                     'width_m': 4.0}})
+        inside = reach_m > distance_m
+        through = (vehicle.tool_tip_x_m * np.cos(off_rad) - distance_m
+                   > WALL_THICKNESS_M + 2 * vehicle.tool_tip_radius_m)
+        if inside:
+            with pytest.raises(ConfigError, match=r"'start_xyz_m' .* puts the vehicle in the "
+                                                  r"wall"):
+                Plant(PlantCoreConfig(), scenario)
+        else:
+            Plant(PlantCoreConfig(), scenario).close()
+        seen['through' if through else 'in' if inside else 'clear'] += 1
 
 
 def test_several_targets_each_have_their_ground_truth():

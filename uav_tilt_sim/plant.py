@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from uav_tilt_common.config import nested, param
+from uav_tilt_common.config import ConfigError, nested, param
 from uav_tilt_common.geometry import cross3, quat_to_matrix, rotor_wrench_matrix
 from uav_tilt_common.pose import Pose
 from uav_tilt_common.state import ActuatorCommand, VehicleState
@@ -98,6 +98,13 @@ class Plant:
         p.resetBasePositionAndOrientation(self.body, (start + R0 @ ids.base_com_offset_m)
                                           .tolist(), q0, physicsClientId=self.client)
         self._com_offset = ids.base_com_offset_m
+        if self._starts_in_wall(start + R0[:, 0] * self.vehicle.tool_tip_x_m):
+            self.close()
+            raise ConfigError(
+                f"parameter 'start_xyz_m' = {scenario.start_xyz_m} with start_yaw_deg "
+                f"{scenario.start_yaw_deg:g} puts the vehicle in the wall (its hub, or its "
+                f"tool, which reaches {self.vehicle.tool_tip_x_m:g} m ahead): start farther "
+                f"from the wall, or turned away from it")
         self._arm_joints = [vehicle_body.ARM_FRONT, vehicle_body.ARM_REAR]
         v = self.vehicle
         self.rotors = RotorBank(v.thrust_tau_s, v.f_max_n, self.dt_physics)
@@ -131,6 +138,18 @@ class Plant:
     def renderer_name(self):
         """'gl' or 'tiny' once a frame was rendered, else None."""
         return None if self.renderer is None else self.renderer.name
+
+    def _starts_in_wall(self, tip_map):
+        """Whether the vehicle where it starts (its tool's tip at ``tip_map``) is in the wall
+        or an object on it, or its tool reaches through the wall's face: PyBullet would
+        throw it out, or it could not take off."""
+        bodies = [self.world.wall_body] + [o.body for o in self.world.objects]
+        if any(p.getClosestPoints(self.body, body, 0.0, physicsClientId=self.client)
+               for body in bodies):
+            return True
+        wall = self.scenario.wall
+        u, v, out = (tip_map - self.world.wall_origin_map) @ self.world.R_map_wall
+        return out < 0.0 and abs(u) <= wall.width_m / 2 and 0.0 <= v <= wall.height_m
 
     def close(self):
         """Release the renderer and the physics server."""

@@ -348,9 +348,11 @@ def _run(args):
         print('uav-tilt campaign: --plan and --scenario go together', file=sys.stderr)
         return 2
     if args.plan:
-        from uav_tilt_tools.fly import check_plan
+        from uav_tilt_tools.fly import check_plan, check_world
         try:
-            check_plan(load_scenario(args.scenario), args.plan)
+            scenario = load_scenario(args.scenario)
+            check_plan(scenario, args.plan)
+            check_world(scenario)
         except (OSError, ConfigError) as err:
             print(f'uav-tilt campaign: {err}', file=sys.stderr)
             return 2

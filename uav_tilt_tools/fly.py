@@ -28,8 +28,8 @@ from uav_tilt_tools.task_metrics import failure_of
 
 # a whole search (mission.search_timeout_s) and an inspection after it
 DURATION_S = 210.0
-__all__ = ['DURATION_S', 'check_plan', 'default_duration_s', 'fly', 'jsonable', 'register',
-           'site_overrides']
+__all__ = ['DURATION_S', 'check_plan', 'check_world', 'default_duration_s', 'fly', 'jsonable',
+           'register', 'site_overrides']
 
 
 def default_duration_s(plan):
@@ -87,6 +87,13 @@ def check_plan(scenario, plan_file, overrides=None):
     overrides = {**(overrides or {}), **site_overrides(scenario), 'plan_file': plan_file}
     plan_of(from_dict(ControllerConfig, overrides))
     return overrides
+
+
+def check_world(scenario):
+    """ConfigError when ``scenario``'s world cannot be flown: it is built once, as the plant
+    builds it (a start in the wall is refused there)."""
+    from uav_tilt_sim.plant import Plant
+    Plant(PlantCoreConfig(), scenario).close()
 
 
 # Controller parameters that fly's own options set.
@@ -152,6 +159,7 @@ def _run(args):
         if args.plan:
             overrides = check_plan(scenario, args.plan, overrides)
         plan_of(from_dict(ControllerConfig, overrides))     # one clear line when bad
+        check_world(scenario)
     except (OSError, ConfigError) as err:
         print(f'uav-tilt fly: {err}', file=sys.stderr)
         return 2
