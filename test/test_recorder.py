@@ -10,6 +10,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap_ros2.decoder import DecoderFactory
+from rosbags.interfaces import QosDurability, QosReliability
+from rosbags.rosbag2 import Reader
 
 from ros_graph import Probe, start, stop
 from uav_tilt_common import names, ros_qos
@@ -112,6 +114,26 @@ def test_publish_time_is_the_header_stamp_and_log_time_the_wall_clock(recordings
         assert publish_ns == msg.clock.sec * 10**9 + msg.clock.nanosec
     # Log time is when the recorder got it: the wall clock of this run, not sim time.
     assert abs(messages['/uav/imu'][-1][1] * 1e-9 - time.time()) < 600
+
+
+def test_its_folder_opens_as_a_rosbag2_bag_with_the_qos_the_plant_offered(recordings):
+    """As `ros2 bag play DIR` opens it (through metadata.yaml), with each topic's offered QoS
+    so that a replay latches what the plant latched."""
+    path, _, _, _ = recordings
+    messages, _, _ = read_all(path)
+    with Reader(path.parent) as reader:         # the folder: metadata.yaml
+        assert {c.topic: c.msgcount for c in reader.connections} == {
+            topic: len(messages.get(topic, ())) for topic in
+            {c.topic for c in reader.connections}}
+        qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+    assert set(EXPECTED_TYPES) <= set(qos)
+    for topic in EXPECTED_TYPES:
+        # the plant publishes every topic reliable (the camera too: REP-2003 readers
+        # subscribe best effort), and latches the target's truth
+        latched = topic == '/uav/ground_truth/target'
+        assert [(q.reliability, q.durability) for q in qos[topic]] == [
+            (QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL if latched
+             else QosDurability.VOLATILE)], topic
 
 
 def test_a_killed_recorder_leaves_its_flushed_chunks_readable(recordings):

@@ -73,6 +73,12 @@ RECORDER_NODE = 'recorder'
 RECORDER_WAIT_S = 30.0
 
 
+def is_latched(topic):
+    """Whether the contract's publisher of ``topic`` (relative name) latches it: the plan and
+    every target's ground truth."""
+    return topic in LATCHED_TOPICS or topic.startswith(GROUND_TRUTH_TARGETS + '/')
+
+
 def ground_truth_target(target_id=''):
     """The ground-truth topic of target ``target_id`` ('' = the scenario's first target)."""
     return f'{GROUND_TRUTH_TARGETS}/{target_id}' if target_id else GROUND_TRUTH_TARGET

@@ -20,6 +20,7 @@ from std_msgs.msg import String
 
 from uav_tilt_common import names, ros_msgs
 from uav_tilt_common.modes import WAITING_FOR_SENSORS
+from uav_tilt_tools.topic_graph import contract_offer
 
 CONTROLLER_STATUS_HZ = 10.0     # controller_node's default status_rate_hz
 STATUS_HZ = 2.0                 # plant_node's and vision_node's
@@ -52,7 +53,7 @@ class FlightBag:
         self.vision = vision
         types = dict(TYPES, **(VISION_TYPES if vision is not None else {}))
         for topic, type_name in types.items():
-            self.bag.add_topic(absolute(topic), type_name)
+            self.bag.add_topic(absolute(topic), type_name, [contract_offer(topic)])
         self._flight = None
         self._saturated_ticks = 0
         self._wall_t0_ns = time.time_ns()
@@ -108,7 +109,8 @@ class FlightBag:
         for target_id, (poi_map, R_map_target) in flight.plant.world.truth_targets().items():
             topic = names.ground_truth_target(target_id)
             if target_id:
-                self.bag.add_topic(absolute(topic), names.TOPIC_TYPES[names.GROUND_TRUTH_TARGET])
+                self.bag.add_topic(absolute(topic), names.TOPIC_TYPES[names.GROUND_TRUTH_TARGET],
+                                   [contract_offer(topic)])
             self._write(topic, ros_msgs.pose_stamped_msg(
                 poi_map, Rotation.from_matrix(R_map_target).as_quat(), ros_msgs.to_stamp(0.0)),
                 now)

@@ -76,7 +76,9 @@ class RecorderNode(Node):
         # The contract's topics are subscribed right after the file is made (launch.sh
         # waits for the file), so before the plant's first tick.
         try:
-            self.bag = McapBag(output_path(self.cfg.output))
+            # a folder of its own is a rosbag2 bag (metadata.yaml at the end)
+            self.bag = McapBag(output_path(self.cfg.output),
+                               own_folder=not self.cfg.output.endswith('.mcap'))
         except FileExistsError as err:
             raise ConfigError(f"parameter 'output' = {self.cfg.output!r}: {err.filename} is "
                               f"there already (a recording is never overwritten)") from None
@@ -122,7 +124,9 @@ class RecorderNode(Node):
         try:
             msg_type = topic_graph.message_class(type_name)
             if old is None:
-                self.bag.add_topic(topic, type_name)
+                self.bag.add_topic(topic, type_name, topic_graph.offered_qos(
+                    self, topic, topic[len(self.prefix):] if topic.startswith(self.prefix)
+                    else topic))
         except (ImportError, AttributeError, LookupError) as err:
             self.skipped.add(topic)
             self.get_logger().warn(f'not recording {topic} [{type_name}]: {err}')

@@ -3,7 +3,7 @@ import importlib
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from uav_tilt_common import names
+from uav_tilt_common import names, ros_qos
 
 
 def resolve(topic, namespace=names.NAMESPACE):
@@ -29,8 +29,23 @@ def contract_qos(topic, depth):
     name, :data:`names.TOPIC_TYPES`): reliable, transient local for the latched ones."""
     return QoSProfile(
         depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if topic in names.LATCHED_TOPICS
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if names.is_latched(topic)
         else DurabilityPolicy.VOLATILE)
+
+
+def contract_offer(topic):
+    """The QoS this project's own nodes publish ``topic`` (relative name) with: latched,
+    /clock's, or the reliable volatile depth 10 of the control path, camera and statuses."""
+    if names.is_latched(topic):
+        return ros_qos.LATCHED
+    return ros_qos.CLOCK if topic == names.CLOCK else ros_qos.CONTROL
+
+
+def offered_qos(node, topic, relative):
+    """The QoS profiles the publishers of ``topic`` offer now, or, with none yet, the one
+    the contract's publisher of ``relative`` offers (:func:`contract_offer`)."""
+    return ([info.qos_profile for info in node.get_publishers_info_by_topic(topic)]
+            or [contract_offer(relative)])
 
 
 def subscription_qos(node, topic, depth):
