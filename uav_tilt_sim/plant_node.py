@@ -115,7 +115,9 @@ class PlantNode(Node):
 
         self.rejects = RejectCounter()
         self.stats = dict(lockstep_waits=0, lockstep_timeouts=0, resent_ticks=0,
-                          late_commands=0, clamped_commands=0, commands=0, dropped_ticks=0)
+                          late_commands=0, repeated_commands=0, clamped_commands=0,
+                          commands=0, dropped_ticks=0)
+        self.answered_tick = -1     # lockstep: the last tick a command stepped
         self.waiting = False            # lockstep: waiting for the command of this tick
         self.synced = False             # lockstep: a command has arrived since the last timeout
         self.ever_commanded = False
@@ -179,13 +181,19 @@ class PlantNode(Node):
         if not self.ever_commanded and not self._recorded():
             self.held_command = data    # applied by the watchdog once the recorder listens
             return
+        stamp_tick = round(stamp_ns * 1e-9 / self.plant.dt_tick)
+        if self.cfg.mode == 'lockstep' and self.synced and stamp_tick != self.plant.tick:
+            # not applied: the tick it answers has been stepped. A second answer to a tick
+            # sent again (its first answer was slow, not lost) is no late command.
+            self.stats['repeated_commands' if stamp_tick == self.answered_tick
+                       else 'late_commands'] += 1
+            return
         self.stats['commands'] += 1
         self.stats['clamped_commands'] += int(result.clamped)
         self.plant.command = result.command
         if not self.ever_commanded and self.cfg.mode == 'lockstep':
             self.run_start = (time.monotonic(), self.plant.t_s)
         self.ever_commanded = True
-        stamp_tick = round(stamp_ns * 1e-9 / self.plant.dt_tick)
         if self.cfg.mode == 'realtime':
             # The answer to tick k normally lands during tick k+1; older is late.
             if stamp_tick < self.plant.tick - 1:
@@ -194,6 +202,7 @@ class PlantNode(Node):
         if stamp_tick != self.plant.tick:
             self.stats['late_commands'] += 1
             return
+        self.answered_tick = stamp_tick
         if not self.synced:
             self.synced = True
             self.tick_timer.cancel()
