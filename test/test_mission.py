@@ -676,6 +676,7 @@ def test_hover_backs_off_what_the_tool_touches_and_holds_there():
     assert flight.mission.phase == 'clear'
     ok, why = flight.mission.set_hover_setpoint([0.0, 0.0, 2.0], 0.0)
     assert not ok and '(clear)' in why
+    assert flight.mission.status['refused_setpoints'] == 1
     flight.run_until(lambda f: f.mission.phase == '', 10.0, target=None)
     flight.run_for(2.0, target=None)
     assert flight.mission.mode == Mode.HOVER
@@ -935,7 +936,9 @@ def test_services_refused_in_wrong_modes():
         assert not ok and 'IDLE' in why
     ok, why = flight.mission.set_hover_setpoint([0.0, 0.0, 1.0], 0.0)
     assert not ok and 'HOVER' in why
+    # a good setpoint at the wrong time: refused, not rejected
     assert flight.mission.status['rejected_setpoints'] == 0
+    assert flight.mission.status['refused_setpoints'] == 1
     flight.mission.update(flight.t_s, flight.state(), None, 0.0, 0.5)
     assert not flight.mission.takeoff()[0]       # stale odometry on the ground
     flight.step()

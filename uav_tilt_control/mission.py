@@ -363,6 +363,7 @@ class Mission:
         self._failsafe_reason = ''
         self.contact_lost = 0
         self.rejected_setpoints = 0
+        self.refused_setpoints = 0      # good ones, sent while the mode takes none
         self._home_map = None           # where it last took off (the geofence's centre)
         self.events = collections.deque(maxlen=200)
 
@@ -416,6 +417,7 @@ class Mission:
             contact_lost=self.contact_lost,
             in_contact=self._in_contact,
             rejected_setpoints=self.rejected_setpoints,
+            refused_setpoints=self.refused_setpoints,
             task_index=self._task_index,
             task_count=len(self.plan),
             task_kind='' if task is None else task.kind,
@@ -502,6 +504,7 @@ class Mission:
             self.rejected_setpoints += 1
             return False, 'setpoint must be 3 finite coordinates and a finite yaw'
         if self._mode != Mode.HOVER or self._flight_phase:
+            self.refused_setpoints += 1
             return False, f'setpoints are accepted in HOVER only, not {self._mode.value}' + (
                 f' ({self._flight_phase})' if self._flight_phase else '')
         lowest_m = self.config.lowest_hover_m()
