@@ -173,7 +173,8 @@ def test_record_keeps_one_mcap_per_run_that_the_report_reads(tmp_path):
     for run in result['runs']:
         folder = run_dir(str(tmp_path), run['index'])
         assert os.listdir(folder) == [BAG_NAME]
-        rec = recording.load_recording(folder, topics=recording.REPORT_TOPICS + (names.ODOM,))
+        rec = recording.load_recording(
+            folder, topics=recording.REPORT_TOPICS + (names.ODOM, names.CLOCK))
         # every controller tick's sensors, as the plant node publishes them
         assert len(rec[names.ODOM]) == len(rec[names.CLOCK]) == run['ticks']
         modes = recording.modes(recording.statuses(rec, names.CONTROLLER_STATUS))

@@ -2,11 +2,13 @@
 
 A *recording* is a dict {topic: [(log_time_ns, message), ...]} in the order the recorder got
 them, with topics named as in :mod:`uav_tilt_common.names` (relative to /uav, /clock
-absolute) and messages anything with the ROS field attributes (decoded MCAP, rclpy
-messages, test doubles). Everything past :func:`load_recording` is pure; a topic that is
-missing gives empty series, not errors. Times are sim time (header stamps) unless named
-log time (when the recorder got them).
+absolute) and messages anything with the ROS field attributes the series read (decoded
+MCAP, the topics of every tick and frame cut down to those fields as they are read,
+:data:`SLIM`; rclpy messages; test doubles). Everything past :func:`load_recording` is
+pure; a topic that is missing gives empty series, not errors. Times are sim time (header
+stamps) unless named log time (when the recorder got them).
 """
+import collections
 import glob
 import json
 import os
@@ -25,7 +27,7 @@ from uav_tilt_common.targets import is_no_target
 from uav_tilt_tools.mission_metrics import push_along_normal
 
 # What the report reads; the camera images and the noisy sensors stay on disk.
-REPORT_TOPICS = (names.CLOCK, names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
+REPORT_TOPICS = (names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
                  names.EE_WRENCH, names.ACTUATORS_STATE, names.ACTUATORS_CMD,
                  names.CONTROLLER_STATUS, names.VISION_STATUS, names.PLANT_STATUS,
                  names.TARGET_POSE, names.CAMERA_INFO, names.CONTROLLER_PLAN)
@@ -34,6 +36,46 @@ REPORT_PREFIXES = (names.GROUND_TRUTH_TARGETS + '/',)
 # What reading a file that ends early may raise at its torn tail (OSError: a seek before
 # the start of a file shorter than MCAP's footer).
 TORN_TAIL = (McapError, EOFError, struct.error, ValueError, OSError)
+
+
+# The fields the report reads of the topics that come every tick or frame, kept as they are
+# read: a decoded Odometry takes about 5 KB of Python objects (two 36-float covariances, the
+# twist), its stamp and pose as these tuples 0.6 KB.
+Stamp = collections.namedtuple('Stamp', 'sec nanosec')
+Header = collections.namedtuple('Header', 'stamp')
+Vector = collections.namedtuple('Vector', 'x y z')
+Quaternion = collections.namedtuple('Quaternion', 'x y z w')
+Pose = collections.namedtuple('Pose', 'position orientation')
+PoseHolder = collections.namedtuple('PoseHolder', 'pose')
+Odometry = collections.namedtuple('Odometry', 'header pose')
+WrenchStamped = collections.namedtuple('WrenchStamped', 'header wrench')
+Wrench = collections.namedtuple('Wrench', 'force')
+JointState = collections.namedtuple('JointState', 'header position effort')
+Stamped = collections.namedtuple('Stamped', 'header')
+
+
+def _header(msg):
+    return Header(Stamp(msg.header.stamp.sec, msg.header.stamp.nanosec))
+
+
+def _odometry(msg):
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    return Odometry(_header(msg), PoseHolder(Pose(Vector(p.x, p.y, p.z),
+                                                  Quaternion(o.x, o.y, o.z, o.w))))
+
+
+def _wrench(msg):
+    f = msg.wrench.force
+    return WrenchStamped(_header(msg), Wrench(Vector(f.x, f.y, f.z)))
+
+
+def _joint_state(msg):
+    return JointState(_header(msg), tuple(msg.position), tuple(msg.effort))
+
+
+SLIM = {names.GROUND_TRUTH_ODOM: _odometry, names.EE_WRENCH: _wrench,
+        names.ACTUATORS_STATE: _joint_state, names.ACTUATORS_CMD: _joint_state,
+        names.CAMERA_INFO: lambda msg: Stamped(_header(msg))}
 
 
 class RecordingError(ValueError):
@@ -122,7 +164,10 @@ def _read_mcap(path, absolute, under, rec):
                     continue
                 name = absolute[channel.topic] = relative
             if channel.id not in decoders:
-                decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+                decode = factory.decoder_for(channel.message_encoding, schema)
+                slim = SLIM.get(name)
+                decoders[channel.id] = (decode if slim is None else
+                                        lambda data, d=decode, s=slim: s(d(data)))
             rec.setdefault(name, []).append(
                 (message.log_time, decoders[channel.id](message.data)))
             count += 1
