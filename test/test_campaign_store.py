@@ -9,12 +9,15 @@ import sys
 import time
 
 import pytest
+from rosbags.interfaces import QosDurability
+from rosbags.rosbag2 import Reader
 
 from uav_tilt_common import names
 from uav_tilt_common.config import ConfigError
 from uav_tilt_tools import campaign as cp
 from uav_tilt_tools import recording
 from uav_tilt_tools.campaign_store import RUNS_FILE, RESULT_FILE, BAG_NAME, run_dir
+from uav_tilt_tools.mcap_bag import METADATA_FILE
 
 # Enough runs that some are still flying when the first is kept, however fast they fly
 # (8 s of sim time takes 1-4 s here).
@@ -172,11 +175,17 @@ def test_record_keeps_one_mcap_per_run_that_the_report_reads(tmp_path):
                          record=True)
     for run in result['runs']:
         folder = run_dir(str(tmp_path), run['index'])
-        assert os.listdir(folder) == [BAG_NAME]
+        assert sorted(os.listdir(folder)) == sorted([BAG_NAME, METADATA_FILE])
         rec = recording.load_recording(
             folder, topics=recording.REPORT_TOPICS + (names.ODOM, names.CLOCK))
         # every controller tick's sensors, as the plant node publishes them
         assert len(rec[names.ODOM]) == len(rec[names.CLOCK]) == run['ticks']
+        # the folder is a rosbag2 bag, latched topics latched as the plant latches them
+        with Reader(folder) as bag:
+            connections = {c.topic: c for c in bag.connections}
+            assert connections['/clock'].msgcount == run['ticks']
+            assert connections['/uav/' + names.GROUND_TRUTH_TARGET].ext.offered_qos_profiles[
+                0].durability == QosDurability.TRANSIENT_LOCAL
         modes = recording.modes(recording.statuses(rec, names.CONTROLLER_STATUS))
         assert modes[-1][1] == run['mode_history'][-1][1]
         assert recording.target_pose(rec) is not None

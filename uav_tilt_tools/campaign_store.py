@@ -4,8 +4,9 @@
   files and their contents' SHA-256 (a resume must match);
 - ``DIR/runs.jsonl``: one JSON line per finished run (the run's dict of the campaign JSON),
   appended and synced to disk as each run finishes, so an interrupted campaign keeps them;
-- ``DIR/run_NNNN/recording.mcap`` with ``--record`` (written before the run's line, so a
-  line means its recording is complete); ``uav-tilt report DIR/run_NNNN`` reads it;
+- ``DIR/run_NNNN/recording.mcap`` and rosbag2's ``metadata.yaml`` with ``--record``
+  (written before the run's line, so a line means its recording is complete);
+  ``uav-tilt report DIR/run_NNNN`` reads it, ``ros2 bag play DIR/run_NNNN`` plays it;
 - ``DIR/campaign.json``: the campaign JSON once every run is in.
 """
 import hashlib
@@ -14,6 +15,7 @@ import os
 
 from uav_tilt_common.config import ConfigError
 from uav_tilt_tools.fly import jsonable
+from uav_tilt_tools.mcap_bag import write_rosbag2_metadata
 
 ARGS_FILE = 'campaign_args.json'
 RUNS_FILE = 'runs.jsonl'
@@ -134,6 +136,7 @@ class RunStore:
             with open(path + '.part', 'wb') as stream:
                 stream.write(bag)
             os.replace(path + '.part', path)
+            write_rosbag2_metadata(path)    # the run's folder opens as a rosbag2 bag
         line = json.dumps(run, default=jsonable) + '\n'
         with open(self.runs_path, 'a', encoding='utf-8') as stream:
             stream.write(line)

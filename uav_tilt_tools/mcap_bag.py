@@ -15,6 +15,7 @@ import collections
 import os
 
 import yaml
+from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from uav_tilt_tools import msg_defs
@@ -49,16 +50,13 @@ class McapBag:
     def __init__(self, path, chunk_bytes=CHUNK_BYTES, own_folder=False):
         """``own_folder``: the file's folder is this bag's (it gets metadata.yaml)."""
         self.path = str(path)
-        self._metadata_path = (os.path.join(os.path.dirname(self.path), METADATA_FILE)
-                               if own_folder else None)
+        self._own_folder = own_folder
         self._stream = open(self.path, 'xb')
         self._writer = Writer(self._stream, chunk_size=chunk_bytes,
                               compression=CompressionType.ZSTD)
         self._writer.start(profile='ros2', library=LIBRARY)
         self._schemas = {}      # type -> schema id
         self._channels = {}     # topic -> (channel id, header-stamped?)
-        self._topics = {}       # topic -> (type, offered QoS dicts), for metadata.yaml
-        self._log_ns = None     # (first, last) log time written
         self.counts = collections.Counter()
         self.closed = False
 
@@ -74,7 +72,6 @@ class McapBag:
             topic, 'cdr', self._schemas[type_name],
             {'offered_qos_profiles': yaml.safe_dump(qos)} if qos else {})
         self._channels[topic] = (channel, msg_defs.starts_with_time(type_name))
-        self._topics[topic] = (type_name, qos)
 
     def write(self, topic, data, log_time_ns):
         """Append one serialized message of a registered topic."""
@@ -84,9 +81,6 @@ class McapBag:
                                  publish_time=max(publish_ns, 0),
                                  sequence=self.counts[topic])
         self.counts[topic] += 1
-        first = log_time_ns if self._log_ns is None else min(self._log_ns[0], log_time_ns)
-        last = log_time_ns if self._log_ns is None else max(self._log_ns[1], log_time_ns)
-        self._log_ns = (first, last)
 
     def flush(self):
         """Close the chunk in progress and push everything to the OS."""
@@ -99,27 +93,35 @@ class McapBag:
             self.closed = True
             self._writer.finish()
             self._stream.close()
-            if self._metadata_path is not None:
-                with open(self._metadata_path, 'w', encoding='utf-8') as stream:
-                    yaml.safe_dump(self.rosbag2_metadata(), stream, sort_keys=False)
+            if self._own_folder:
+                write_rosbag2_metadata(self.path)
 
-    def rosbag2_metadata(self):
-        """rosbag2's metadata.yaml (version 9) of what was written."""
-        start_ns, end_ns = self._log_ns or (0, 0)
-        span = {'starting_time': {'nanoseconds_since_epoch': start_ns},
-                'duration': {'nanoseconds': end_ns - start_ns}}
-        total = sum(self.counts.values())
-        name = os.path.basename(self.path)
-        return {'rosbag2_bagfile_information': {
-            'version': ROSBAG2_VERSION, 'storage_identifier': 'mcap', **span,
-            'message_count': total,
-            'topics_with_message_count': [
-                {'topic_metadata': {'name': topic, 'type': type_name,
-                                    'serialization_format': 'cdr',
-                                    'offered_qos_profiles': qos, 'type_description_hash': ''},
-                 'message_count': self.counts[topic]}
-                for topic, (type_name, qos) in self._topics.items()],
-            'compression_format': '', 'compression_mode': '',
-            'relative_file_paths': [name],
-            'files': [{'path': name, **span, 'message_count': total}],
-            'custom_data': {}, 'ros_distro': ROS_DISTRO}}
+
+def write_rosbag2_metadata(path):
+    """Write rosbag2's metadata.yaml (version 9) of the complete MCAP file ``path`` beside
+    it, from the file's own summary: its folder then opens as a bag."""
+    with open(path, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    stats = summary.statistics
+    span = {'starting_time': {'nanoseconds_since_epoch': stats.message_start_time},
+            'duration': {'nanoseconds': stats.message_end_time - stats.message_start_time}}
+    name = os.path.basename(path)
+    metadata = {'rosbag2_bagfile_information': {
+        'version': ROSBAG2_VERSION, 'storage_identifier': 'mcap', **span,
+        'message_count': stats.message_count,
+        'topics_with_message_count': [
+            {'topic_metadata': {
+                'name': channel.topic, 'type': summary.schemas[channel.schema_id].name,
+                'serialization_format': channel.message_encoding,
+                'offered_qos_profiles': yaml.safe_load(
+                    channel.metadata.get('offered_qos_profiles', '[]')),
+                'type_description_hash': ''},
+             'message_count': stats.channel_message_counts.get(channel.id, 0)}
+            for channel in summary.channels.values()],
+        'compression_format': '', 'compression_mode': '',
+        'relative_file_paths': [name],
+        'files': [{'path': name, **span, 'message_count': stats.message_count}],
+        'custom_data': {}, 'ros_distro': ROS_DISTRO}}
+    with open(os.path.join(os.path.dirname(path), METADATA_FILE), 'w',
+              encoding='utf-8') as stream:
+        yaml.safe_dump(metadata, stream, sort_keys=False)
