@@ -16,8 +16,8 @@ from uav_tilt_common import names
 from uav_tilt_common.config import ConfigError
 from uav_tilt_tools import campaign as cp
 from uav_tilt_tools import recording
-from uav_tilt_tools.campaign_store import RUNS_FILE, RESULT_FILE, BAG_NAME, run_dir
-from uav_tilt_tools.mcap_bag import METADATA_FILE
+from uav_tilt_tools.campaign_store import RUNS_FILE, RESULT_FILE, run_dir
+from uav_tilt_tools.mcap_bag import METADATA_FILE, RECORDING_FILE
 
 # Enough runs that some are still flying when the first is kept, however fast they fly
 # (8 s of sim time takes 1-4 s here).
@@ -175,7 +175,7 @@ def test_record_keeps_one_mcap_per_run_that_the_report_reads(tmp_path):
                          record=True)
     for run in result['runs']:
         folder = run_dir(str(tmp_path), run['index'])
-        assert sorted(os.listdir(folder)) == sorted([BAG_NAME, METADATA_FILE])
+        assert sorted(os.listdir(folder)) == sorted([RECORDING_FILE, METADATA_FILE])
         rec = recording.load_recording(
             folder, topics=recording.REPORT_TOPICS + (names.ODOM, names.CLOCK))
         # every controller tick's sensors, as the plant node publishes them

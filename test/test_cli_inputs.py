@@ -1,11 +1,16 @@
 """`uav-tilt fly`, `campaign` and `bench` refuse what they cannot run with one line and exit
 code 2 before running anything (DESIGN section 5-7), and fly what they can: a world
 without a target, and every summary.json key."""
+import json
+import os
+
 import pytest
 import yaml
+from rosbags.rosbag2 import Reader
 
 from uav_tilt_tools import cli
 from uav_tilt_tools.fly import check_world, fly
+from uav_tilt_tools.mcap_bag import METADATA_FILE, RECORDING_FILE
 from uav_tilt_tools.report import SUMMARY_KEYS
 from uav_tilt_sim.scenario import load_scenario
 
@@ -71,6 +76,27 @@ def test_a_start_in_the_wall_is_one_line(tmp_path, capsys):
         scenario['start_yaw_deg'] = 180.0
         written(tmp_path, f'{name}.yaml', scenario)
         check_world(load_scenario(path))
+
+
+def test_fly_records_a_bag_that_the_report_reads_and_never_overwrites_it(tmp_path, capsys):
+    """`fly --record DIR`: the flight as the recorder writes the node graph's run, a rosbag2
+    bag that `uav-tilt report DIR` scores as fly did; a second flight into DIR is refused."""
+    run = tmp_path / 'runs' / 'mine'
+    argv = ['fly', '--scenario', 'config/scenarios/default.yaml', '--target-source',
+            'ground_truth', '--duration', '3', '--record', str(run)]
+    code, out, _ = refusal(capsys, argv)
+    flown = json.loads(out)
+    assert code == 1 and flown['failure']['reason'] == 'not_completed'    # 3 s: no touch
+    assert sorted(os.listdir(run)) == sorted([RECORDING_FILE, METADATA_FILE])
+    with Reader(run) as bag:
+        ticks = {c.topic: c.msgcount for c in bag.connections}['/clock']
+    assert ticks == flown['ticks']
+    code, out, err = refusal(capsys, ['report', str(run)])
+    assert code == 1 and json.loads(out)['failure']['reason'] == 'not_completed', err
+    recorded = (run / RECORDING_FILE).read_bytes()
+    code, out, err = refusal(capsys, argv)
+    assert code == 2 and out == '' and len(err) == 1 and 'holds a recording' in err[0], err
+    assert (run / RECORDING_FILE).read_bytes() == recorded
 
 
 @pytest.mark.parametrize('plan, words', [

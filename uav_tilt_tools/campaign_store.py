@@ -15,12 +15,11 @@ import os
 
 from uav_tilt_common.config import ConfigError
 from uav_tilt_tools.fly import jsonable
-from uav_tilt_tools.mcap_bag import write_rosbag2_metadata
+from uav_tilt_tools.mcap_bag import RECORDING_FILE, write_rosbag2_metadata
 
 ARGS_FILE = 'campaign_args.json'
 RUNS_FILE = 'runs.jsonl'
 RESULT_FILE = 'campaign.json'
-BAG_NAME = 'recording.mcap'
 DIGEST = '_sha256'          # campaign_args.json: FILE_KEY + DIGEST is FILE_KEY's digest
 
 
@@ -132,7 +131,7 @@ class RunStore:
         if bag is not None:
             folder = run_dir(self.out_dir, run['index'])
             os.makedirs(folder, exist_ok=True)
-            path = os.path.join(folder, BAG_NAME)
+            path = os.path.join(folder, RECORDING_FILE)
             with open(path + '.part', 'wb') as stream:
                 stream.write(bag)
             os.replace(path + '.part', path)

@@ -11,6 +11,7 @@ ids) comes from the scenario, as a survey would give it.
 """
 import argparse
 import json
+import os
 import sys
 import time
 
@@ -23,6 +24,7 @@ from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import Scenario, load_scenario
 from uav_tilt_common import cli_args
+from uav_tilt_tools.mcap_bag import RECORDING_FILE, write_rosbag2_metadata
 from uav_tilt_tools.site_params import site_overrides
 from uav_tilt_tools.task_metrics import failure_of
 
@@ -138,6 +140,10 @@ def register(sub):
                         help='an inspection plan (YAML: touch and slide tasks)')
     parser.add_argument('--set', action='append', metavar='KEY=VALUE',
                         help='a controller parameter, e.g. mission.hold_time_s=3')
+    parser.add_argument('--record', default=None, metavar='DIR',
+                        help='write the flight to DIR/recording.mcap, as the recorder writes a '
+                             'run of the node graph (a rosbag2 bag `uav-tilt report DIR` '
+                             'reads); a DIR that holds a recording is refused')
     parser.add_argument('--duration', type=cli_args.duration_s, default=None,
                         help=f'simulated seconds allowed (default {DURATION_S:.0f} per task, '
                              f'and the time it pushes beyond a {MissionConfig().hold_time_s:g} s '
@@ -160,12 +166,32 @@ def _run(args):
             overrides = check_plan(scenario, args.plan, overrides)
         plan_of(from_dict(ControllerConfig, overrides))     # one clear line when bad
         check_world(scenario)
+        record = _record_path(args.record)
     except (OSError, ConfigError) as err:
         print(f'uav-tilt fly: {err}', file=sys.stderr)
         return 2
-    result = fly(scenario, args.target_source, overrides, args.duration)
+    result = fly(scenario, args.target_source, overrides, args.duration, record=record)
+    if record is not None:
+        write_rosbag2_metadata(record)      # the folder opens as a rosbag2 bag
     print(json.dumps(result, default=jsonable))
     return 0 if result['failure'] is None else 1
+
+
+def _record_path(folder):
+    """The recording of ``--record DIR`` (None without it); ConfigError when DIR cannot be
+    made or holds a recording already (one is never overwritten)."""
+    if folder is None:
+        return None
+    path = os.path.join(folder, RECORDING_FILE)
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f'--record {folder}: cannot make the folder ({err.strerror})') \
+            from None
+    if os.path.exists(path):
+        raise ConfigError(f'--record {folder}: it holds a recording already ({path}); a '
+                          f'recording is never overwritten')
+    return path
 
 
 def jsonable(value):

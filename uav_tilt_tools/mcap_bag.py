@@ -22,6 +22,7 @@ from uav_tilt_tools import msg_defs
 
 LIBRARY = 'uav_tilt recorder'
 CHUNK_BYTES = 1 << 20
+RECORDING_FILE = 'recording.mcap'     # what a run's folder holds (recorder, fly, campaign)
 METADATA_FILE = 'metadata.yaml'
 ROSBAG2_VERSION = 9             # the metadata.yaml version of Jazzy's rosbag2
 ROS_DISTRO = 'jazzy'

@@ -27,9 +27,8 @@ from uav_tilt_common import names
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_tools import topic_graph
-from uav_tilt_tools.mcap_bag import McapBag
+from uav_tilt_tools.mcap_bag import RECORDING_FILE, McapBag
 
-DEFAULT_FILE = 'recording.mcap'
 # Deeper than the nodes' own queues: the recorder must absorb bursts, not drop them.
 QUEUE_DEPTH = 100
 
@@ -38,7 +37,7 @@ QUEUE_DEPTH = 100
 class RecorderConfig:
     """Parameters of recorder_node."""
 
-    output: str = param(DEFAULT_FILE, doc='a new MCAP file (*.mcap), or a folder that gets '
+    output: str = param(RECORDING_FILE, doc='a new MCAP file (*.mcap), or a folder that gets '
                         'recording.mcap')
     # The debug image is drawn only for subscribers, so recording it would load the vision
     # node it observes.
@@ -54,7 +53,7 @@ def output_path(output):
     a folder (made when missing, like its parents) that gets recording.mcap."""
     if not output.endswith('.mcap'):
         os.makedirs(output, exist_ok=True)
-        return os.path.join(output, DEFAULT_FILE)
+        return os.path.join(output, RECORDING_FILE)
     os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
     return output
 
