@@ -87,7 +87,8 @@ fi
 if [[ -n $record ]]; then
     { mkdir -p -- "$record" && [[ -w $record ]]; } 2>/dev/null \
         || die "--record: cannot write to the directory $record"
-    [[ ! -e $record/recording.mcap ]] \
+    # any bag (ours, or another tool's metadata.yaml and *.mcap) would be overwritten or mixed
+    [[ ! -e $record/metadata.yaml ]] && ! compgen -G "$record/*.mcap" > /dev/null \
         || die "--record: $record holds a recording already (never overwritten): choose another directory"
 fi
 if ((vision_only)) && [[ -n $record$mission$scenario$target_source ]] \

@@ -100,9 +100,13 @@ def test_a_file_for_the_whole_graph_is_taken_by_each_node(tmp_path):
                words=["unknown parameter 'zz_misspelt'"])
 
 
-@pytest.mark.parametrize('output', ['runs/gt', 'runs/gt/recording.mcap'])
-def test_a_recording_is_never_overwritten(tmp_path, output):
-    earlier = tmp_path / 'runs' / 'gt' / 'recording.mcap'
+@pytest.mark.parametrize('output, held', [
+    ('runs/gt', 'recording.mcap'), ('runs/gt/recording.mcap', 'recording.mcap'),
+    # another tool's bag in the folder (`ros2 bag record -o runs/gt`): neither its index nor
+    # its data is mixed with a new recording
+    ('runs/gt', 'metadata.yaml'), ('runs/gt', 'gt_0.mcap')])
+def test_a_recording_is_never_overwritten(tmp_path, output, held):
+    earlier = tmp_path / 'runs' / 'gt' / held
     earlier.parent.mkdir(parents=True)
     earlier.write_bytes(b'an earlier run')
     fatal_line(tmp_path, 'uav_tilt_tools.recorder_node', '-p', f'output:={output}',

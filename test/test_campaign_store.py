@@ -142,9 +142,13 @@ def test_a_damaged_store_is_refused_and_keeps_its_runs(tmp_path):
     with pytest.raises(ConfigError, match='line 2 is no run'):
         cp.campaign(3, SEED, duration_s=0.1, progress=False, out=out, resume=True)
     assert runs_path.read_bytes() == damaged
-    # arguments that are no JSON, an --out that is a file, a resume with no folder
+    # arguments that are no JSON, or JSON but no mapping, an --out that is a file, a resume
+    # with no folder
     (out / 'campaign_args.json').write_text('{"n": 3, "seed":')
     with pytest.raises(ConfigError, match='unreadable'):
+        cp.campaign(3, SEED, duration_s=0.1, progress=False, out=out, resume=True)
+    (out / 'campaign_args.json').write_text('[3, 7]')
+    with pytest.raises(ConfigError, match=r'holds the campaign \[3, 7\], not'):
         cp.campaign(3, SEED, duration_s=0.1, progress=False, out=out, resume=True)
     (tmp_path / 'file').write_text('')
     with pytest.raises(ConfigError, match='cannot make the folder'):

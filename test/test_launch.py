@@ -231,6 +231,9 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
     (['--param', 'controller.contact_force:='], '--param: NODE.NAME:=VALUE'),
     (['--no-vision', '--record', '/proc/run'], '--record: cannot write'),
     (['--no-vision', '--record', 'done'], '--record: done holds a recording already'),
+    # another tool's bag (`ros2 bag record -o other`)
+    (['--no-vision', '--record', 'other'], '--record: other holds a recording already'),
+    (['--no-vision', '--record', 'indexed'], '--record: indexed holds a recording already'),
     # what an option sets is not a --param's to split
     (['--param', 'plant.mode:=realtime'], '--param plant.mode: set by --realtime'),
     (['--param', 'controller.autostart:=inspect'], 'set by --mission'),
@@ -243,6 +246,9 @@ def test_bad_arguments_start_nothing(tmp_path, args, words):
     (tmp_path / 'world.yaml').write_text('wall: 0\n')
     (tmp_path / 'done').mkdir()
     (tmp_path / 'done' / 'recording.mcap').write_bytes(b'an earlier run')
+    for folder, name in (('other', 'other_0.mcap'), ('indexed', 'metadata.yaml')):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / name).write_bytes(b'an earlier run')
     result = subprocess.run([LAUNCH, *args], cwd=tmp_path, capture_output=True, text=True,
                             timeout=30)
     assert result.returncode == 2 and words in result.stderr, result.stderr

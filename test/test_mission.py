@@ -936,8 +936,12 @@ def test_services_refused_in_wrong_modes():
         assert not ok and 'IDLE' in why
     ok, why = flight.mission.set_hover_setpoint([0.0, 0.0, 1.0], 0.0)
     assert not ok and 'HOVER' in why
-    # a good setpoint at the wrong time: refused, not rejected
+    # a good setpoint at the wrong time: refused, not rejected; a bad one is rejected
     assert flight.mission.status['rejected_setpoints'] == 0
+    assert flight.mission.status['refused_setpoints'] == 1
+    ok, why = flight.mission.set_hover_setpoint([0.0, 0.0, -1.0], 0.0)
+    assert not ok and 'lowest hover' in why
+    assert flight.mission.status['rejected_setpoints'] == 1
     assert flight.mission.status['refused_setpoints'] == 1
     flight.mission.update(flight.t_s, flight.state(), None, 0.0, 0.5)
     assert not flight.mission.takeoff()[0]       # stale odometry on the ground

@@ -53,7 +53,7 @@ def bag_dir(tmp_path_factory):
 @pytest.fixture(scope='module')
 def flights(bag_dir):
     """inclination -> summary of the plan's flight, the two flown side by side."""
-    records = [str(bag_dir / 'recording.mcap'), None]
+    records = [str(bag_dir), None]
     jobs = list(zip(INCLINATIONS_DEG, SEEDS, records))
     with multiprocessing.get_context('spawn').Pool(min(2, os.cpu_count() or 1)) as pool:
         return dict(pool.imap_unordered(_fly, jobs))

@@ -7,9 +7,12 @@ import time
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import String
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap_ros2.decoder import DecoderFactory
+from rclpy.duration import Duration
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import QosDurability, QosReliability
 from rosbags.rosbag2 import Reader
 
@@ -38,6 +41,9 @@ RELIABLE_HZ = {'/clock': 300, '/uav/imu': 300, '/uav/odom': 300, '/uav/ee_wrench
 # Subscribed best effort (REP-2003): frames may be lost on a loaded machine, never invented.
 BEST_EFFORT_HZ = {'/uav/camera/color/image_raw': 30, '/uav/camera/depth/image_raw': 30,
                   '/uav/camera/camera_info': 30}
+OFFER_TOPIC = '/uav/probe/offer'
+OFFER_QOS = QoSProfile(depth=3, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       deadline=Duration(seconds=2))
 CAMERA = ('camera/color/image_raw,camera/depth/image_raw,camera/camera_info,'
           'vision/debug_image')
 
@@ -53,10 +59,13 @@ def recordings(tmp_path_factory):
         probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
         assert probe.spin_until(lambda: probe.messages[names.PLANT_STATUS], 60.0), \
             (tmp / 'plant.log').read_text()
+        # a topic outside the contract, found by discovery with the QoS its publisher offers
+        probe.node.create_publisher(String, OFFER_TOPIC, OFFER_QOS)
         recorder = start('uav_tilt_tools.recorder_node', log_path=tmp / 'recorder.log',
                          params={'output': str(tmp)})
         killed = start('uav_tilt_tools.recorder_node', log_path=tmp / 'killed.log',
-                       params={'output': str(tmp / 'killed.mcap'), 'exclude': CAMERA,
+                       params={'output': str(tmp / 'killed' / 'killed.mcap'),
+                               'exclude': CAMERA,
                                'flush_period_s': 0.5})
         # the recording window starts once both recorders subscribe (their start-up, a few
         # seconds on a loaded machine, would otherwise eat into it)
@@ -68,7 +77,7 @@ def recordings(tmp_path_factory):
     finally:
         probe.close()
         stop(plant)
-    return tmp / 'recording.mcap', code, tmp / 'killed.mcap', (tmp / 'recorder.log')
+    return tmp / 'recording.mcap', code, tmp / 'killed' / 'killed.mcap', (tmp / 'recorder.log')
 
 
 def read_all(path):
@@ -127,6 +136,11 @@ def test_its_folder_opens_as_a_rosbag2_bag_with_the_qos_the_plant_offered(record
             {c.topic for c in reader.connections}}
         qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
     assert set(EXPECTED_TYPES) <= set(qos)
+    # discovered: what its publisher offered (DDS does not carry the history depth)
+    (offered,) = qos[OFFER_TOPIC]
+    assert (offered.reliability, offered.durability) == (QosReliability.BEST_EFFORT,
+                                                         QosDurability.VOLATILE)
+    assert (offered.deadline.sec, offered.deadline.nsec) == (2, 0)
     for topic in EXPECTED_TYPES:
         # the plant publishes every topic reliable (the camera too: REP-2003 readers
         # subscribe best effort), and latches the target's truth
@@ -160,5 +174,7 @@ def test_a_killed_recorder_leaves_its_flushed_chunks_readable(recordings):
 def test_the_output_is_a_folder_unless_it_names_an_mcap_file(tmp_path, monkeypatch, output,
                                                              path):
     monkeypatch.chdir(tmp_path)
-    assert os.path.normpath(output_path(output)) == os.path.normpath(path)
+    got, own_folder = output_path(output)
+    assert os.path.normpath(got) == os.path.normpath(path)
+    assert own_folder == (not output.endswith('.mcap'))
     assert (tmp_path / path).parent.is_dir() and not (tmp_path / path).exists()

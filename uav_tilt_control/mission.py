@@ -503,10 +503,6 @@ class Mission:
         if p.shape != (3,) or not (np.all(np.isfinite(p)) and np.isfinite(yaw_rad)):
             self.rejected_setpoints += 1
             return False, 'setpoint must be 3 finite coordinates and a finite yaw'
-        if self._mode != Mode.HOVER or self._flight_phase:
-            self.refused_setpoints += 1
-            return False, f'setpoints are accepted in HOVER only, not {self._mode.value}' + (
-                f' ({self._flight_phase})' if self._flight_phase else '')
         lowest_m = self.config.lowest_hover_m()
         if p[2] < lowest_m:
             self.rejected_setpoints += 1
@@ -516,6 +512,10 @@ class Mission:
         if outside:
             self.rejected_setpoints += 1
             return False, f'setpoint {p.tolist()} is outside the geofence: {outside}'
+        if self._mode != Mode.HOVER or self._flight_phase:
+            self.refused_setpoints += 1
+            return False, f'setpoints are accepted in HOVER only, not {self._mode.value}' + (
+                f' ({self._flight_phase})' if self._flight_phase else '')
         self._plan(p, self.config.hover_speed_m_s)
         self._yaw_goal = float(yaw_rad)
         return True, 'setpoint accepted'

@@ -28,6 +28,7 @@ import numpy as np
 from uav_tilt_common.cli_args import INTERRUPTED
 from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_tools.fly import DURATION_S, jsonable
+from uav_tilt_tools.mcap_bag import RECORDING_FILE
 from uav_tilt_common.targets import OBJECT_CLASSES
 from uav_tilt_control.site import HINT_ERROR_M
 from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
@@ -150,15 +151,14 @@ def run_one(job):
     scenario, hint = random_draw(job['seed'], job['corners'])
     overrides = site_overrides(scenario, hint) if hint is not None else {}
     with tempfile.TemporaryDirectory(prefix='uav_tilt_run_') as tmp:
-        record = os.path.join(tmp, 'recording.mcap') if job['record'] else None
         if job['plan_file']:
             scenario = with_conditions(load_scenario(job['scenario_file']), scenario)
             hint, overrides = None, {**site_overrides(scenario), 'plan_file': job['plan_file']}
         result = fly(scenario, job['target_source'], overrides, job['duration_s'],
-                     threads=job['threads'], record=record)
+                     threads=job['threads'], record=tmp if job['record'] else None)
         bag = None
-        if record is not None:
-            with open(record, 'rb') as stream:
+        if job['record']:
+            with open(os.path.join(tmp, RECORDING_FILE), 'rb') as stream:
                 bag = stream.read()
     result.update(index=job['index'], seed=job['seed'], hint_uv_m=hint,
                   wall_distance_m=float(np.hypot(*scenario.wall.position_m)),

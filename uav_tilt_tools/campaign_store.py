@@ -52,8 +52,9 @@ def _check_same_campaign(out_dir, found, args):
         return {k: v for k, v in values.items() if not k.endswith(DIGEST)}
 
     if not isinstance(found, dict) or without_digests(found) != without_digests(args):
-        raise ConfigError(f'{out_dir} holds the campaign {without_digests(found)}, not '
-                          f'{without_digests(args)}')
+        raise ConfigError(f'{out_dir} holds the campaign '
+                          f'{without_digests(found) if isinstance(found, dict) else found}, '
+                          f'not {without_digests(args)}')
     for key, digest in args.items():
         if key.endswith(DIGEST) and found.get(key, digest) != digest:
             raise ConfigError(f'{args[key[:-len(DIGEST)]]} has changed since the campaign in '

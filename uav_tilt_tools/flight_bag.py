@@ -43,11 +43,12 @@ def absolute(topic, namespace=names.NAMESPACE):
 class FlightBag:
     """Per-tick recorder of a Flight into one MCAP file; call :meth:`close` at the end."""
 
-    def __init__(self, path, controller_config, camera_config, vision=None):
+    def __init__(self, path, controller_config, camera_config, vision=None, own_folder=False):
         """``vision``: the flight's CameraVision (its frames give target/* and the camera
-        info), or None when the target comes from ground truth."""
+        info), or None when the target comes from ground truth; ``own_folder``: the file's
+        folder is the recording's (:class:`McapBag`)."""
         from uav_tilt_tools.mcap_bag import McapBag
-        self.bag = McapBag(path)
+        self.bag = McapBag(path, own_folder=own_folder)
         self.config = controller_config
         self.camera = camera_config
         self.vision = vision

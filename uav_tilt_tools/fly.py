@@ -11,7 +11,6 @@ ids) comes from the scenario, as a survey would give it.
 """
 import argparse
 import json
-import os
 import sys
 import time
 
@@ -24,7 +23,7 @@ from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import Scenario, load_scenario
 from uav_tilt_common import cli_args
-from uav_tilt_tools.mcap_bag import RECORDING_FILE, write_rosbag2_metadata
+from uav_tilt_tools.mcap_bag import recording_folder
 from uav_tilt_tools.site_params import site_overrides
 from uav_tilt_tools.task_metrics import failure_of
 
@@ -48,8 +47,9 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
     summary dict.
 
     ``threads``: the detector's (and OpenCV's) thread pool, 0 = the libraries' defaults;
-    ``record``: an MCAP path to write the flight to, as the recorder would
-    (:mod:`uav_tilt_tools.flight_bag`).
+    ``record``: a folder to write the flight to as the recorder writes a run
+    (:mod:`uav_tilt_tools.flight_bag`: recording.mcap and rosbag2's metadata.yaml;
+    FileExistsError when it holds a recording, :func:`mcap_bag.recording_folder`).
     """
     from uav_tilt_tools.inprocess import camera_vision, run_mission
     values = {'target_source': target_source, **(overrides or {})}
@@ -62,7 +62,8 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
     bag = None
     if record is not None:
         from uav_tilt_tools.flight_bag import FlightBag
-        bag = FlightBag(record, config, plant_config.camera, vision)
+        bag = FlightBag(recording_folder(record), config, plant_config.camera, vision,
+                        own_folder=True)
     start = time.perf_counter()
     try:
         result = run_mission(scenario, config, duration_s=duration_s,
@@ -166,32 +167,27 @@ def _run(args):
             overrides = check_plan(scenario, args.plan, overrides)
         plan_of(from_dict(ControllerConfig, overrides))     # one clear line when bad
         check_world(scenario)
-        record = _record_path(args.record)
+        if args.record is not None:
+            _check_record(args.record)
     except (OSError, ConfigError) as err:
         print(f'uav-tilt fly: {err}', file=sys.stderr)
         return 2
-    result = fly(scenario, args.target_source, overrides, args.duration, record=record)
-    if record is not None:
-        write_rosbag2_metadata(record)      # the folder opens as a rosbag2 bag
+    result = fly(scenario, args.target_source, overrides, args.duration, record=args.record)
     print(json.dumps(result, default=jsonable))
     return 0 if result['failure'] is None else 1
 
 
-def _record_path(folder):
-    """The recording of ``--record DIR`` (None without it); ConfigError when DIR cannot be
-    made or holds a recording already (one is never overwritten)."""
-    if folder is None:
-        return None
-    path = os.path.join(folder, RECORDING_FILE)
+def _check_record(folder):
+    """ConfigError when ``--record DIR`` cannot be made or holds a recording already (one is
+    never overwritten)."""
     try:
-        os.makedirs(folder, exist_ok=True)
+        recording_folder(folder)
+    except FileExistsError as err:
+        raise ConfigError(f'--record {folder}: it holds a recording already '
+                          f'({err.filename}); a recording is never overwritten') from None
     except OSError as err:
         raise ConfigError(f'--record {folder}: cannot make the folder ({err.strerror})') \
             from None
-    if os.path.exists(path):
-        raise ConfigError(f'--record {folder}: it holds a recording already ({path}); a '
-                          f'recording is never overwritten')
-    return path
 
 
 def jsonable(value):

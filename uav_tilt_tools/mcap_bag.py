@@ -12,6 +12,7 @@ rosbag2's ``metadata.yaml`` at close, so that the folder opens as a bag
 (``ros2 bag info|play DIR``, rosbags) as well as the file.
 """
 import collections
+import errno
 import os
 
 import yaml
@@ -26,6 +27,18 @@ RECORDING_FILE = 'recording.mcap'     # what a run's folder holds (recorder, fly
 METADATA_FILE = 'metadata.yaml'
 ROSBAG2_VERSION = 9             # the metadata.yaml version of Jazzy's rosbag2
 ROS_DISTRO = 'jazzy'
+
+
+def recording_folder(folder):
+    """The path of a new recording in ``folder``, made when missing: FileExistsError when
+    it holds one already (an MCAP file, or a rosbag2 bag's metadata.yaml), which would be
+    overwritten or mixed with the new one."""
+    os.makedirs(folder, exist_ok=True)
+    held = sorted(name for name in os.listdir(folder)
+                  if name == METADATA_FILE or name.endswith('.mcap'))
+    if held:
+        raise FileExistsError(errno.EEXIST, 'holds a recording', os.path.join(folder, held[0]))
+    return os.path.join(folder, RECORDING_FILE)
 
 
 def qos_dicts(profiles):

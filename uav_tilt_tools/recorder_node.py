@@ -27,7 +27,7 @@ from uav_tilt_common import names
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_tools import topic_graph
-from uav_tilt_tools.mcap_bag import RECORDING_FILE, McapBag
+from uav_tilt_tools.mcap_bag import RECORDING_FILE, McapBag, recording_folder
 
 # Deeper than the nodes' own queues: the recorder must absorb bursts, not drop them.
 QUEUE_DEPTH = 100
@@ -49,13 +49,14 @@ class RecorderConfig:
 
 
 def output_path(output):
-    """The MCAP path of parameter ``output``: a name ending in .mcap is the file, any other
-    a folder (made when missing, like its parents) that gets recording.mcap."""
+    """The MCAP path of parameter ``output`` and whether its folder is the recording's: a
+    name ending in .mcap is the file, any other a folder (made when missing, like its
+    parents) that gets recording.mcap, refused when it holds a recording
+    (:func:`mcap_bag.recording_folder`)."""
     if not output.endswith('.mcap'):
-        os.makedirs(output, exist_ok=True)
-        return os.path.join(output, RECORDING_FILE)
+        return recording_folder(output), True
     os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
-    return output
+    return output, False
 
 
 class RecorderNode(Node):
@@ -76,8 +77,8 @@ class RecorderNode(Node):
         # waits for the file), so before the plant's first tick.
         try:
             # a folder of its own is a rosbag2 bag (metadata.yaml at the end)
-            self.bag = McapBag(output_path(self.cfg.output),
-                               own_folder=not self.cfg.output.endswith('.mcap'))
+            path, own_folder = output_path(self.cfg.output)
+            self.bag = McapBag(path, own_folder=own_folder)
         except FileExistsError as err:
             raise ConfigError(f"parameter 'output' = {self.cfg.output!r}: {err.filename} is "
                               f"there already (a recording is never overwritten)") from None
