@@ -95,7 +95,7 @@ def test_fly_records_a_bag_that_the_report_reads_and_never_overwrites_it(tmp_pat
     assert code == 1 and json.loads(out)['failure']['reason'] == 'not_completed', err
     recorded = (run / RECORDING_FILE).read_bytes()
     code, out, err = refusal(capsys, argv)
-    assert code == 2 and out == '' and len(err) == 1 and 'holds a recording' in err[0], err
+    assert code == 2 and out == '' and len(err) == 1 and 'never overwritten' in err[0], err
     assert (run / RECORDING_FILE).read_bytes() == recorded
 
 

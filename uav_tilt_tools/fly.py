@@ -23,7 +23,7 @@ from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import Scenario, load_scenario
 from uav_tilt_common import cli_args
-from uav_tilt_tools.mcap_bag import recording_folder
+from uav_tilt_tools.mcap_bag import not_recordable, recording_folder
 from uav_tilt_tools.site_params import site_overrides
 from uav_tilt_tools.task_metrics import failure_of
 
@@ -182,12 +182,8 @@ def _check_record(folder):
     never overwritten)."""
     try:
         recording_folder(folder)
-    except FileExistsError as err:
-        raise ConfigError(f'--record {folder}: it holds a recording already '
-                          f'({err.filename}); a recording is never overwritten') from None
     except OSError as err:
-        raise ConfigError(f'--record {folder}: cannot make the folder ({err.strerror})') \
-            from None
+        raise not_recordable(f'--record {folder}', err) from None
 
 
 def jsonable(value):

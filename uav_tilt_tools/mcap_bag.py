@@ -19,6 +19,7 @@ import yaml
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
+from uav_tilt_common.config import ConfigError
 from uav_tilt_tools import msg_defs
 
 LIBRARY = 'uav_tilt recorder'
@@ -39,6 +40,15 @@ def recording_folder(folder):
     if held:
         raise FileExistsError(errno.EEXIST, 'holds a recording', os.path.join(folder, held[0]))
     return os.path.join(folder, RECORDING_FILE)
+
+
+def not_recordable(named, err):
+    """The ConfigError (one line) for the OSError ``err`` of making a new recording where
+    ``named`` (the option or parameter and its value) says."""
+    if isinstance(err, FileExistsError):
+        return ConfigError(f'{named}: {err.filename} is there already (a recording is never '
+                           f'overwritten, nor mixed with another)')
+    return ConfigError(f'{named}: {err.strerror}')
 
 
 def qos_dicts(profiles):

@@ -24,10 +24,10 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
 from uav_tilt_common import names
-from uav_tilt_common.config import ConfigError, param
+from uav_tilt_common.config import param
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_tools import topic_graph
-from uav_tilt_tools.mcap_bag import RECORDING_FILE, McapBag, recording_folder
+from uav_tilt_tools.mcap_bag import RECORDING_FILE, McapBag, not_recordable, recording_folder
 
 # Deeper than the nodes' own queues: the recorder must absorb bursts, not drop them.
 QUEUE_DEPTH = 100
@@ -79,12 +79,8 @@ class RecorderNode(Node):
             # a folder of its own is a rosbag2 bag (metadata.yaml at the end)
             path, own_folder = output_path(self.cfg.output)
             self.bag = McapBag(path, own_folder=own_folder)
-        except FileExistsError as err:
-            raise ConfigError(f"parameter 'output' = {self.cfg.output!r}: {err.filename} is "
-                              f"there already (a recording is never overwritten)") from None
         except OSError as err:
-            raise ConfigError(f"parameter 'output' = {self.cfg.output!r}: {err.strerror}") \
-                from None
+            raise not_recordable(f"parameter 'output' = {self.cfg.output!r}", err) from None
         for relative, type_name in names.TOPIC_TYPES.items():
             topic = topic_graph.resolve(relative, namespace)
             if self.wanted(topic):
