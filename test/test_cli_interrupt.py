@@ -69,3 +69,14 @@ def test_an_interrupted_command_is_one_line_and_leaves_nothing(tmp_path, tmp, ar
     assert lines[-1].startswith(f'uav-tilt {args[0]}: interrupted'), stderr
     assert wait_for(lambda: not any(alive(pid) for pid in workers), 10.0), workers
     assert not list(tmp.glob('uav_tilt_run_*'))
+
+
+def test_a_vision_campaign_that_finishes_ends_without_a_word_on_stderr(tmp):
+    """Its workers end on their own: terminated, the ones already in their interpreter's exit
+    printed a SystemExit traceback from torch's exit hook, one per worker."""
+    proc = started(tmp, ['campaign', '--n', '2', '--workers', '2', '--duration', '1',
+                         '--target-source', 'vision'])
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert 'Traceback' not in err and 'Exception ignored' not in err, err
+    assert not [p for p in tmp.iterdir() if p.name.startswith('uav_tilt_run_')]

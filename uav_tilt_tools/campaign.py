@@ -297,6 +297,11 @@ def _local_runs(run_one, jobs, workers, address=None):
         return
     with multiprocessing.get_context('spawn').Pool(workers, initializer=_ignore_sigint) as pool:
         yield from pool.imap_unordered(run_one, jobs)
+        # every run is in: the workers end on their own. The pool's terminate would send
+        # SIGTERM to workers already in their interpreter's exit, where the SystemExit it
+        # raises is a traceback from an exit hook (torch's, with vision).
+        pool.close()
+        pool.join()
 
 
 def _ignore_sigint():
