@@ -120,9 +120,7 @@ class RecorderNode(Node):
         try:
             msg_type = topic_graph.message_class(type_name)
             if old is None:
-                self.bag.add_topic(topic, type_name, topic_graph.offered_qos(
-                    self, topic, topic[len(self.prefix):] if topic.startswith(self.prefix)
-                    else topic))
+                self.bag.add_topic(topic, type_name, topic_graph.offered_qos(self, topic))
         except (ImportError, AttributeError, LookupError) as err:
             self.skipped.add(topic)
             self.get_logger().warn(f'not recording {topic} [{type_name}]: {err}')

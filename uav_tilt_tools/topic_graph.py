@@ -41,9 +41,12 @@ def contract_offer(topic):
     return ros_qos.CLOCK if topic == names.CLOCK else ros_qos.CONTROL
 
 
-def offered_qos(node, topic, relative):
-    """The QoS profiles the publishers of ``topic`` offer now, or, with none yet, the one
-    the contract's publisher of ``relative`` offers (:func:`contract_offer`)."""
+def offered_qos(node, topic):
+    """The QoS profiles the publishers of ``topic`` (absolute) offer now, or, with none yet,
+    the one the contract's publisher offers (:func:`contract_offer`, of its name relative to
+    the node's namespace)."""
+    prefix = node.get_namespace().rstrip('/') + '/'
+    relative = topic[len(prefix):] if topic.startswith(prefix) else topic
     return ([info.qos_profile for info in node.get_publishers_info_by_topic(topic)]
             or [contract_offer(relative)])
 
