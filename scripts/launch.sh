@@ -84,13 +84,6 @@ if [[ $mission == plan && -z $plan ]] || [[ -n $plan && $mission != plan ]]; the
     die '--mission plan and --plan FILE go together'
 fi
 [[ -z $plan || -f $plan ]] || die "--plan: no file $plan"
-if [[ -n $record ]]; then
-    { mkdir -p -- "$record" && [[ -w $record ]]; } 2>/dev/null \
-        || die "--record: cannot write to the directory $record"
-    # any bag (ours, or another tool's metadata.yaml and *.mcap) would be overwritten or mixed
-    [[ ! -e $record/metadata.yaml ]] && ! compgen -G "$record/*.mcap" > /dev/null \
-        || die "--record: $record holds a recording already (never overwritten): choose another directory"
-fi
 if ((vision_only)) && [[ -n $record$mission$scenario$target_source ]] \
         || ((vision_only && (foxglove || !vision || realtime))); then
     die '--vision-only starts vision alone: it takes no other option but --param'
@@ -117,6 +110,11 @@ fi
 # line and exit 2 before anything starts; its site (wall, target ids) is what --plan needs.
 if ((!vision_only)); then
     site=$("$PY" -m uav_tilt_tools.site_params "$scenario") || { usage >&2; exit 2; }
+fi
+# A folder that holds a bag (ours, or another tool's) is refused: it would be overwritten or
+# mixed, and the recorder would refuse it only once the graph is up.
+if [[ -n $record ]]; then
+    "$PY" -m uav_tilt_tools.mcap_bag "$record" || { usage >&2; exit 2; }
 fi
 
 # CMD := the command of executable $1 (python module $2).

@@ -229,11 +229,11 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
 @pytest.mark.parametrize('args, words', [
     (['--mission', 'survey'], "--mission: 'inspect' or 'plan'"),
     (['--param', 'controller.contact_force:='], '--param: NODE.NAME:=VALUE'),
-    (['--no-vision', '--record', '/proc/run'], '--record: cannot write'),
-    (['--no-vision', '--record', 'done'], '--record: done holds a recording already'),
+    (['--no-vision', '--record', '/proc/run'], '--record /proc/run: No such file'),
+    (['--no-vision', '--record', 'done'], '--record done: done/recording.mcap is there already'),
     # another tool's bag (`ros2 bag record -o other`)
-    (['--no-vision', '--record', 'other'], '--record: other holds a recording already'),
-    (['--no-vision', '--record', 'indexed'], '--record: indexed holds a recording already'),
+    (['--no-vision', '--record', 'other'], 'other/other_0.mcap is there already'),
+    (['--no-vision', '--record', 'indexed'], 'indexed/metadata.yaml is there already'),
     # what an option sets is not a --param's to split
     (['--param', 'plant.mode:=realtime'], '--param plant.mode: set by --realtime'),
     (['--param', 'controller.autostart:=inspect'], 'set by --mission'),

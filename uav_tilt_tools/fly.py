@@ -23,7 +23,7 @@ from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import Scenario, load_scenario
 from uav_tilt_common import cli_args
-from uav_tilt_tools.mcap_bag import not_recordable, recording_folder
+from uav_tilt_tools.mcap_bag import check_recording_folder, recording_folder
 from uav_tilt_tools.site_params import site_overrides
 from uav_tilt_tools.task_metrics import failure_of
 
@@ -168,22 +168,13 @@ def _run(args):
         plan_of(from_dict(ControllerConfig, overrides))     # one clear line when bad
         check_world(scenario)
         if args.record is not None:
-            _check_record(args.record)
+            check_recording_folder(f'--record {args.record}', args.record)
     except (OSError, ConfigError) as err:
         print(f'uav-tilt fly: {err}', file=sys.stderr)
         return 2
     result = fly(scenario, args.target_source, overrides, args.duration, record=args.record)
     print(json.dumps(result, default=jsonable))
     return 0 if result['failure'] is None else 1
-
-
-def _check_record(folder):
-    """ConfigError when ``--record DIR`` cannot be made or holds a recording already (one is
-    never overwritten)."""
-    try:
-        recording_folder(folder)
-    except OSError as err:
-        raise not_recordable(f'--record {folder}', err) from None
 
 
 def jsonable(value):

@@ -14,6 +14,7 @@ rosbag2's ``metadata.yaml`` at close, so that the folder opens as a bag
 import collections
 import errno
 import os
+import sys
 
 import yaml
 from mcap.reader import make_reader
@@ -39,7 +40,18 @@ def recording_folder(folder):
                   if name == METADATA_FILE or name.endswith('.mcap'))
     if held:
         raise FileExistsError(errno.EEXIST, 'holds a recording', os.path.join(folder, held[0]))
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), folder)
     return os.path.join(folder, RECORDING_FILE)
+
+
+def check_recording_folder(named, folder):
+    """ConfigError (one line, :func:`not_recordable`) unless ``folder`` can take a new
+    recording (:func:`recording_folder`, which makes it when missing)."""
+    try:
+        recording_folder(folder)
+    except OSError as err:
+        raise not_recordable(named, err) from None
 
 
 def not_recordable(named, err):
@@ -149,3 +161,20 @@ def write_rosbag2_metadata(path):
     with open(os.path.join(os.path.dirname(path), METADATA_FILE), 'w',
               encoding='utf-8') as stream:
         yaml.safe_dump(metadata, stream, sort_keys=False)
+
+
+def main(argv=None):
+    """``python -m uav_tilt_tools.mcap_bag DIR``: exit 2 with one line on stderr unless DIR
+    can take a new recording (scripts/launch.sh checks ``--record DIR`` before it starts
+    anything)."""
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        check_recording_folder(f'--record {argv[0]}', argv[0])
+    except ConfigError as err:
+        print(err, file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
