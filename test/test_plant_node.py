@@ -233,7 +233,11 @@ def test_realtime_plant_that_cannot_keep_up_says_so(tmp_path, probe):
             lambda: int(latest_status(probe).get('late_commands', 0)) == 5, 10.0)
         assert probe.spin_until(lambda: latest_status(probe).get('rtf_mean') not in
                                 (None, 'None'), 10.0)
+        before = len(probe.messages[names.PLANT_STATUS])
         probe.spin_until(lambda: False, 6.0)       # past the first warning period
+        # the status keeps its rate (10 Hz) while the ticks cannot keep up: it came seconds
+        # late when its timer queued behind theirs
+        assert len(probe.messages[names.PLANT_STATUS]) - before >= 0.75 * 10.0 * 6.0
         status = latest_status(probe)
         assert int(status['dropped_ticks']) > 0
         assert 0.0 < float(status['rtf_mean']) < 40.0

@@ -301,10 +301,29 @@ class Plant:
         map_cam = Pose(R_map_base, s.p_map) @ self.vehicle.camera_in_base()
         return map_cam.p, map_cam.R
 
-    def render(self, lighting=None, segmentation=False):
-        """Render the eye-in-hand camera: (rgb, depth_m, seg)."""
+    def render_state(self):
+        """What a frame of this tick depends on: PyBullet's base pose of the vehicle (its
+        centre of mass) and the arm angles, nine floats (for :mod:`camera_process`)."""
+        pos, quat = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        return (*pos, *quat, *self._tilts())
+
+    def set_render_state(self, state):
+        """Put the vehicle where :meth:`render_state` of a plant of the same scenario had it:
+        a plant that only renders."""
+        pos, quat, tilts = state[:3], state[3:7], state[7:]
+        p.resetBasePositionAndOrientation(self.body, pos, quat, physicsClientId=self.client)
+        for joint, angle in zip(self._arm_joints, tilts):
+            p.resetJointState(self.body, joint, angle, 0.0, physicsClientId=self.client)
+        self._truth = None
+
+    def start_renderer(self):
+        """Make the renderer (a GL context) now rather than at the first frame."""
         if self.renderer is None:
             self.renderer = cam_mod.make_renderer(self.config.camera, self._warn)
+
+    def render(self, lighting=None, segmentation=False):
+        """Render the eye-in-hand camera: (rgb, depth_m, seg)."""
+        self.start_renderer()
         p_cam, R_map_cam = self.camera_pose()
         rgb, depth, seg = cam_mod.render_with(self.renderer, self.scene, p_cam, R_map_cam,
                                               lighting, segmentation)

@@ -1,7 +1,9 @@
 """plant_node: the PyBullet plant on ROS 2 (DESIGN sections 3-4).
 
 Owns time: each 300 Hz tick it publishes the control-path sensors and /clock stamped t_k,
-then the camera frame when one is due (so that rendering overlaps the controller's tick).
+then the camera frame when one is due (so that rendering overlaps the controller's tick; in
+realtime the frame is drawn by a process of its own, :mod:`uav_tilt_sim.camera_process`, and
+published once drawn, so that it does not delay the ticks that follow).
 In lockstep it steps past t_k only once `actuators/cmd` stamped t_k has arrived, sending
 t_k again every RESEND_PERIOD_S while it waits, or after `lockstep_timeout_s` of wall time,
 when it applies the failsafe and free-runs until commands come back. In realtime, sim time
@@ -32,6 +34,7 @@ from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.ros_recorder import recorder_listens
 from uav_tilt_common.state import ActuatorCommand
+from uav_tilt_sim.camera_process import CameraProcess
 from uav_tilt_sim.command_check import check_command
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
@@ -64,6 +67,9 @@ class PlantNodeConfig(PlantCoreConfig):
     timeout_failsafe: str = param('cut_thrust', choices=('cut_thrust', 'hold_last'),
                                   doc='what a lockstep timeout applies')
     camera_enabled: bool = param(True, doc='render and publish the RGB-D camera')
+    camera_process: bool = param(
+        True, doc='realtime: draw the camera in a process of its own, so that a frame (2-3 ms '
+        'on a CPU) does not delay the tick it belongs to; lockstep draws it on the tick')
     status_rate_hz: float = param(2.0, lo=0.1, hi=50.0, doc='plant/status rate (wall clock)')
     hold_until_recorded: bool = param(
         False, doc='lockstep: keep the first tick until the recorder\'s subscription to every '
@@ -91,6 +97,9 @@ class PlantNode(Node):
         scenario = load_scenario(self.cfg.scenario_file or None)
         self.plant = Plant(self.cfg, scenario, warn=self.get_logger().warn)
         self.camera_every = max(1, int(round(self.cfg.control_hz / self.cfg.camera.rate_hz)))
+        self.camera = None      # the camera's process, where it draws the frames
+        if self.cfg.mode == 'realtime' and self.cfg.camera_enabled and self.cfg.camera_process:
+            self._start_camera_process(scenario)
         q = ros_qos.CONTROL
         quiet = functools.partial(ros_qos.quiet_publisher, self)
         self.pub_clock = quiet(Clock, names.CLOCK, ros_qos.CLOCK)
@@ -116,7 +125,7 @@ class PlantNode(Node):
         self.rejects = RejectCounter()
         self.stats = dict(lockstep_waits=0, lockstep_timeouts=0, resent_ticks=0,
                           late_commands=0, repeated_commands=0, clamped_commands=0,
-                          commands=0, dropped_ticks=0)
+                          commands=0, dropped_ticks=0, skipped_frames=0)
         self.answered_tick = -1     # lockstep: the last tick a command stepped
         self.waiting = False            # lockstep: waiting for the command of this tick
         self.synced = False             # lockstep: a command has arrived since the last timeout
@@ -139,7 +148,9 @@ class PlantNode(Node):
         if self.cfg.mode == 'lockstep':
             self.tick_timer.cancel()
             self.create_timer(0.05, self.on_watchdog)
-        self.create_timer(1.0 / self.cfg.status_rate_hz, self.on_status)
+        self.status_due = time.monotonic()
+        if self.cfg.mode == 'lockstep':
+            self.create_timer(1.0 / self.cfg.status_rate_hz, self.on_status)
         self.get_logger().info(
             f'plant up: mode={self.cfg.mode} rtf={self.target_rtf} '
             f'scenario={self.cfg.scenario_file or "default"} camera={self.cfg.camera_enabled}')
@@ -279,6 +290,7 @@ class PlantNode(Node):
             # the clock starts with the first tick, not with the node's start-up
             self.run_start = (time.monotonic(), self.plant.t_s)
             self.wall_start, self.sim_start = self.run_start
+        self._publish_drawn_frame()
         rate = self._free_rtf()
         dt = self.plant.dt_tick
         now = time.monotonic()
@@ -291,6 +303,11 @@ class PlantNode(Node):
         for _ in range(backlog):
             self.plant.step()
             self._publish_tick()
+        if self.cfg.mode == 'realtime' and now >= self.status_due:
+            # from here, not from a timer of its own: on a host that cannot keep up, rclpy's
+            # timer events for the ticks queue up faster than they are served, and the status
+            # timer's came later and later (seconds), just when the status matters
+            self.on_status()
 
     # --- stepping -----------------------------------------------------------------------
     def _apply_failsafe(self):
@@ -316,8 +333,34 @@ class PlantNode(Node):
         self.waiting = self.cfg.mode == 'lockstep' and (self.synced or not self.ever_commanded)
         self.wait_started = self.resent_at = time.monotonic()
         if self.cfg.camera_enabled and self.plant.tick % self.camera_every == 0:
-            rgb, depth, _ = self.plant.render()
-            self._publish_frame(self.plant.t_s, rgb, depth)
+            if self.camera is None:
+                rgb, depth, _ = self.plant.render()
+                self._publish_frame(self.plant.t_s, rgb, depth)
+            elif not self.camera.request(self.plant.t_s, self.plant.render_state()):
+                self.stats['skipped_frames'] += 1   # the last one is still being drawn
+
+    def _start_camera_process(self, scenario):
+        try:
+            self.camera = CameraProcess(self.cfg, scenario)
+        except RuntimeError as err:
+            self.get_logger().warn(f'{err}: the camera is drawn on the tick')
+            return
+        for line in self.camera.warnings:
+            self.get_logger().warn(line)
+
+    def _publish_drawn_frame(self):
+        """Publish the frame the camera's process has drawn, if it has."""
+        if self.camera is None:
+            return
+        try:
+            frame = self.camera.frame()
+        except RuntimeError as err:
+            self.get_logger().error(f'{err}: the camera is drawn on the tick from now on')
+            self.camera.close()
+            self.camera = None
+            return
+        if frame is not None:
+            self._publish_frame(*frame)
 
     def _publish_sensors(self):
         s = self.plant.read_sensors()
@@ -352,6 +395,7 @@ class PlantNode(Node):
         """plant/status: sim and wall time, real-time factor, lockstep counters, rejected
         commands, contact."""
         now = time.monotonic()
+        self.status_due = now + 1.0 / self.cfg.status_rate_hz
         last_wall, last_sim = self.last_status
         rtf = (self.plant.t_s - last_sim) / max(now - last_wall, 1e-9)
         self.last_status = (now, self.plant.t_s)
@@ -405,6 +449,8 @@ class PlantNode(Node):
         if self.cfg.summary_file:
             with open(self.cfg.summary_file, 'w', encoding='utf-8') as stream:
                 stream.write(json.dumps(self.summary()) + '\n')
+        if self.camera is not None:
+            self.camera.close()
         self.plant.close()
         return super().destroy_node()
 
