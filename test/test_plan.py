@@ -60,7 +60,12 @@ def test_the_shipped_plan_resolves_on_its_wall():
 @pytest.mark.parametrize('tasks, words', [
     ([], ["'tasks'", 'at least one task']),
     ([_touch(target='plate_c')], ['tasks[0] (touch)', "'target' = 'plate_c'", 'plate_a']),
-    ([_touch(), _slide(force_n=-5.0)], ["tasks[1].slide.force_n", '-5.0', 'range']),
+    # the message states the range enforced, the mission's (contact threshold, force limit)
+    ([_touch(), _slide(force_n=-5.0)], ['tasks[1] (slide)', "'force_n' = -5.0",
+                                        f'({FORCES[0]}, {FORCES[1]})']),
+    ([_touch(force_n=0.5)], ['tasks[0] (touch)', f'({FORCES[0]}, {FORCES[1]})']),
+    # a touch is scored by its push over the hold: a hold of 0 s has none
+    ([_touch(hold_s=0.0)], ['tasks[0] (touch)', "'hold_s' = 0.0", 'more than 0']),
     ([_touch(force_n=15.0)], ['tasks[0] (touch)', "'force_n' = 15.0", 'force_limit_n']),
     ([_slide(to_uv_m=[3.0, 2.0])], ['tasks[0] (slide)', "'to_uv_m' = [3.0, 2.0]",
                                     'off the wall']),
@@ -89,14 +94,16 @@ def test_a_plan_below_the_lowest_the_mission_works_at_is_refused(tmp_path):
     margin_m = float(np.random.default_rng().uniform(0.01, 0.1))
     refused = [_slide(from_uv_m=[1.3, lowest_m - margin_m], to_uv_m=[1.3, 2.0]),
                _touch(near_uv_m=[-0.4, lowest_m - HINT_ERROR_M - margin_m])]
-    for task in refused:
-        with pytest.raises(ConfigError, match='below the lowest the mission works at'):
+    # each message states the limit applied to its kind of task
+    for task, limit_m in zip(refused, (lowest_m, lowest_m - HINT_ERROR_M)):
+        with pytest.raises(ConfigError, match=f'below {limit_m:g} m: the lowest the mission '
+                                              f'works at, {lowest_m:g} m'):
             parse_plan({'tasks': [task]}, _site(), FORCES, lowest_m)
     kept = [_slide(from_uv_m=[1.3, lowest_m + margin_m], to_uv_m=[1.3, 2.0]),
             _touch(near_uv_m=[-0.4, lowest_m - HINT_ERROR_M + margin_m])]
     assert len(parse_plan({'tasks': kept}, _site(), FORCES, lowest_m)) == 2
     # the controller checks its plan file so, with its own mission's ground
-    with pytest.raises(ConfigError, match='below the lowest'):
+    with pytest.raises(ConfigError, match='below .* the lowest the mission works at'):
         plan_of(_config(tmp_path, refused[:1]))
     assert plan_of(_config(tmp_path, refused[:1], **{'mission.ground_z_m': -1.0}))
 
@@ -114,6 +121,15 @@ def test_the_default_time_limit_covers_what_the_plan_pushes():
     # the plan of the defaults keeps the per-task limit
     assert default_duration_s(load_plan(PLAN, _site(), FORCES)) == pytest.approx(
         3 * DURATION_S + 1.0 / 0.1 - MissionConfig().hold_time_s)
+
+
+def test_a_touch_on_a_site_without_target_ids_says_a_target_needs_an_id():
+    """A scenario whose one target has no id (default.yaml) gives the site no ids."""
+    site = _site()
+    site.target_ids = []
+    with pytest.raises(ConfigError) as err:
+        parse_plan({'tasks': [_touch()]}, site, FORCES)
+    assert "target objects need" in str(err.value) and "'id'" in str(err.value)
 
 
 def test_a_slide_needs_the_surveyed_wall():

@@ -29,8 +29,8 @@ class TouchTask:
 
     target: str = param('')
     near_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
-    force_n: float = param(5.0, lo=0.0, hi=20.0)
-    hold_s: float = param(5.0, lo=0.0, hi=600.0)
+    force_n: float = param(5.0)     # range: check_force, from the mission's config
+    hold_s: float = param(5.0, hi=600.0)    # more than 0: see _resolve
 
 
 @dataclasses.dataclass
@@ -41,7 +41,7 @@ class SlideTask:
     via_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, item_length=2)
     to_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
     speed_m_s: float = param(0.1, lo=0.005, hi=0.5)
-    force_n: float = param(5.0, lo=0.0, hi=20.0)
+    force_n: float = param(5.0)     # range: check_force, from the mission's config
 
     def points_uv(self):
         """The polyline's vertices, from first to last."""
@@ -194,11 +194,20 @@ def _resolve(i, entry, site, force_range_n, lowest_m):
                if site.point_map(uv)[2] + slack_m < lowest_m]
         if low:
             name, uv = low[0]
+            slack = f" less the hint's error, {slack_m:g} m" if slack_m else ''
             raise ConfigError(f"{where}: '{name}' = {uv!r} is at z = "
-                              f"{site.point_map(uv)[2]:.2f} m, below the lowest the mission "
-                              f"works at, {lowest_m:g} m (mission.ground_z_m + 2 "
-                              f"mission.land_detect_height_m)")
+                              f"{site.point_map(uv)[2]:.2f} m, below {lowest_m - slack_m:g} m: "
+                              f"the lowest the mission works at, {lowest_m:g} m "
+                              f"(mission.ground_z_m + 2 mission.land_detect_height_m){slack}")
     if kind == 'touch':
+        if task.hold_s <= 0.0:
+            raise ConfigError(f"{where}: 'hold_s' = {task.hold_s!r} must be more than 0: a "
+                              f"touch is scored by its push over the hold")
+        if not site.target_ids:
+            raise ConfigError(f"{where}: 'target' = {task.target!r}: the site names no "
+                              f"target (site.target_ids is empty); a plan names a target "
+                              f"by its 'id', which a scenario's target objects need "
+                              f"(e.g. id: plate_a)")
         if task.target not in site.target_ids:
             raise ConfigError(f"{where}: 'target' = {task.target!r} is not one of "
                               f"site.target_ids {list(site.target_ids)!r}")
