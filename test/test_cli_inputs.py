@@ -158,6 +158,20 @@ def test_a_bad_option_value_is_refused_by_the_parser(capsys, argv, words):
     assert all(w in err[-1] for w in words) and 'error' in err[-1], err
 
 
+@pytest.mark.parametrize('args', [
+    ['--scenario', 'config/scenarios/plan.yaml', '--plan', 'config/plans/inspection.yaml'],
+    ['--scenario', 'config/scenarios/default.yaml', '--hint', '1.5', '1.5'],
+])
+def test_a_site_value_set_by_the_user_wins_over_the_scenarios(capsys, args):
+    """As launch.sh's --param: on a wall the user says is 1 m wide, a plan's slide at
+    u = 1.3 m and a hint at u = 1.5 m are off it."""
+    code, out, err = refusal(capsys, ['fly', '--target-source', 'ground_truth', '--duration',
+                                      '0.5', *args, '--set', 'site.wall_width_m=1.0'])
+    assert code == 2 and out == '' and len(err) == 1, err
+    assert 'off the wall' in err[0] and (
+        '[-0.5, 0.5]' in err[0] or 'site.wall_width_m 1.0' in err[0]), err
+
+
 def test_a_hint_just_off_the_wall_is_within_its_error(capsys):
     # a target at the wall's edge, its hint 0.25 m beyond it: accepted (and flown briefly)
     code, out, err = refusal(capsys, ['fly', '--scenario', 'config/scenarios/default.yaml',
