@@ -14,7 +14,7 @@ from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore, plan_of
 from uav_tilt_control.mission import MissionConfig
-from uav_tilt_control.plan import Slide, Touch, load_plan, parse_plan
+from uav_tilt_control.plan import LineProgress, Slide, Touch, load_plan, parse_plan
 from uav_tilt_control.site import HINT_ERROR_M, SiteConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.fly import DURATION_S, default_duration_s
@@ -73,13 +73,17 @@ def test_the_shipped_plan_resolves_on_its_wall():
                                                    'off the wall']),
     ([_slide(speed_m_s=0.0)], ['tasks[0].slide.speed_m_s', 'range']),
     ([_slide(to_uv_m=[1.3, 1.0])], ['tasks[0] (slide)', 'repeats']),
+    # a tool tip that never moved would be within the tolerance of the end of a line so short
+    ([_slide(to_uv_m=[1.33, 1.0])], ['tasks[0] (slide)', '0.03 m long',
+                                     'slide_path_tolerance_m']),
     ([{'touch': {'target': 'plate_a'}}], ['tasks[0] (touch)', "'near_uv_m' is required"]),
     ([{'drill': {}}], ['tasks[0]', 'touch', 'slide']),
     ([_touch(hold=3.0)], ["unknown parameter 'tasks[0].touch.hold'"]),
 ])
 def test_a_bad_plan_is_refused_with_one_line(tasks, words):
     with pytest.raises(ConfigError) as err:
-        parse_plan({'tasks': tasks}, _site(), FORCES)
+        parse_plan({'tasks': tasks}, _site(), FORCES,
+                   tolerance_m=MissionConfig().slide_path_tolerance_m)
     message = str(err.value)
     assert '\n' not in message
     for word in words:
@@ -121,6 +125,33 @@ def test_the_default_time_limit_covers_what_the_plan_pushes():
     # the plan of the defaults keeps the per-task limit
     assert default_duration_s(load_plan(PLAN, _site(), FORCES)) == pytest.approx(
         3 * DURATION_S + 1.0 / 0.1 - MissionConfig().hold_time_s)
+
+
+def test_a_line_just_longer_than_the_slides_tolerance_is_taken():
+    tolerance_m = MissionConfig().slide_path_tolerance_m
+    (slide,) = parse_plan({'tasks': [_slide(to_uv_m=[1.3, 1.0 + tolerance_m * 1.01])]},
+                          _site(), FORCES, tolerance_m=tolerance_m)
+    assert slide.length_m > tolerance_m
+
+
+@pytest.mark.parametrize('line, tips, along', [
+    # a tip that stays where it started has come nowhere, even where the line ends there
+    ([[0.0, 1.0], [0.0, 1.5], [0.0, 1.0]], [[0.0, 1.0]] * 5, 0.0),
+    # nor one that stays on the line past its start
+    ([[0.0, 1.0], [0.0, 2.0]], [[0.01, 1.5]] * 100, 0.5),
+    # up and back: the way back counts on the way back, not as a return to the start
+    ([[0.0, 1.0], [0.0, 1.5], [0.0, 1.0]],
+     [[0.001, v] for v in (*np.linspace(1.0, 1.5, 101), *np.linspace(1.5, 1.1, 81))], 0.9),
+    # an L, its corner cut by 1 cm: the nearest point of each leg
+    ([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]],
+     [[u, 0.0] for u in np.linspace(0.0, 0.99, 100)] + [[0.99, 0.01]]
+     + [[1.0, v] for v in np.linspace(0.02, 0.6, 59)], 1.6),
+])
+def test_the_progress_along_a_line_follows_it_leg_by_leg(line, tips, along):
+    progress = LineProgress(line)
+    for tip in tips:
+        progress.update(tip)
+    assert progress.along_m == pytest.approx(along, abs=1e-9)
 
 
 def test_a_touch_on_a_site_without_target_ids_says_a_target_needs_an_id():

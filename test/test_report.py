@@ -20,7 +20,7 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.controller_node import _loop_stats
 from uav_tilt_common.modes import Mode
-from uav_tilt_tools import recording, report
+from uav_tilt_tools import recording, report, task_metrics
 from uav_tilt_tools.mcap_bag import McapBag
 from uav_tilt_tools.report_plots import write_plots
 
@@ -403,3 +403,25 @@ def test_per_task_results_from_the_recorded_plan(tmp_path):
     assert slide['force_rms_error_n'] == pytest.approx(np.sqrt(np.mean((slid - 5.0) ** 2)))
     written = write_plots(rec, str(tmp_path), TOOL_X)
     assert str(tmp_path / 'slides.png') in written
+
+
+def test_a_slide_that_comes_back_on_itself_is_measured_along_its_line():
+    """Up 0.5 m and back down 0.4 m: 0.9 m of its 1 m line covered, though the tip ends
+    0.1 m from where it began; the plot's axis along the line does not fold either."""
+    start = np.array([WALL_X, 1.3, 1.0])
+    line = [start, start + [0.0, 0.0, 0.5], start]
+    heights = np.concatenate((np.linspace(0.0, 0.5, 151), np.linspace(0.5, 0.1, 121)[1:]))
+    t = np.arange(len(heights)) * DT
+    tips = start + np.outer(heights, [0.0, 0.0, 1.0]) + [-0.004, 0.0, 0.0]  # pushed in
+    task = dict(index=0, kind='slide', force_n=5.0, success=True, reason='', contact_lost=0,
+                t_contact_s=[0.0, t[-1] + DT], points_map=[p.tolist() for p in line],
+                normal_map=[-1.0, 0.0, 0.0], length_m=1.0,
+                points_uv=[[1.3, 1.0], [1.3, 1.5], [1.3, 1.0]])
+    normal = np.array([-1.0, 0.0, 0.0])
+    (slide,) = task_metrics.task_results([task], t, tips, np.outer(np.full(len(t), 5.0),
+                                                                   normal))
+    assert slide['length_m'] == pytest.approx(0.9, abs=1e-9)
+    assert slide['path_max_error_m'] == pytest.approx(0.0, abs=1e-12)
+    assert slide['force_mean_n'] == pytest.approx(5.0)
+    _, along, _ = task_metrics.slide_geometry(task, tips, normal)
+    assert np.all(np.diff(along) >= 0.0) and along[-1] == pytest.approx(0.9, abs=1e-9)

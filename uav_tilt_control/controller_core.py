@@ -64,7 +64,7 @@ def plan_of(cfg):
         check_force("parameter 'contact_force'", cfg.contact_force, force_range_n)
         return one_touch_plan(cfg.site.check(), cfg.contact_force, m.hold_time_s)
     return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, force_range_n,
-                     m.lowest_hover_m())
+                     m.lowest_hover_m(), m.slide_path_tolerance_m)
 
 
 class ControllerCore:

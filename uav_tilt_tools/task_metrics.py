@@ -11,7 +11,9 @@ contact_lost, t_contact_s = [start, end] of HOLD or SLIDE, ...).
   the task's force;
 - slide: over the slide, the push's RMS error, the tool tip's distance from the requested
   line in the wall's plane (``path_rms_error_m``, ``path_max_error_m``), the length of line
-  it covered (``length_m``) and the time it took (``duration_s``).
+  it covered, measured along the line as the mission measures it (``length_m``,
+  :class:`uav_tilt_control.plan.LineProgress`: a line that comes back on itself does not
+  fold), and the time it took (``duration_s``).
 
 The push is the contact force along the wall's outward normal (positive pushing).
 """
@@ -19,6 +21,7 @@ import numpy as np
 
 from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
+from uav_tilt_control.plan import LineProgress
 
 # The inspection bar (DESIGN section 7): over the hold, the true tool tip within 1 cm of the
 # point of interest along the surface, and the push within 0.1 N mean and 0.2 N RMS of the
@@ -146,8 +149,9 @@ def _touch(task, t_s, tips, forces, truth, wall_normal_map):
 
 
 def slide_geometry(task, tips, normal):
-    """(distance from the line in the wall's plane, arc length of the nearest point of the
-    line, tips in wall coordinates (u, v)) of each tool tip (N, 3) for slide ``task``."""
+    """(distance from the line in the wall's plane, how far along the line the tips have
+    come (:class:`LineProgress`), tips in wall coordinates (u, v)) of each tool tip (N, 3)
+    of slide ``task``, in their order."""
     points = np.asarray(task['points_map'], dtype=float)
     flat = np.eye(3) - np.outer(normal, normal)
     # the line's own frame: x along the wall (horizontal), y up it, as the wall's (u, v)
@@ -155,18 +159,13 @@ def slide_geometry(task, tips, normal):
     uv0 = np.asarray(task.get('points_uv') or [[0.0, 0.0]], dtype=float)[0]
     tips = np.asarray(tips, dtype=float).reshape(-1, 3)
     distance = np.full(len(tips), np.inf)
-    along = np.zeros(len(tips))
-    covered = 0.0
     for a, b in zip(points[:-1], points[1:]):
         d = flat @ (b - a)
-        length = float(np.linalg.norm(d))
         rel = (tips - a) @ flat
-        u = np.clip(rel @ d / (length * length), 0.0, 1.0)
-        dist = np.linalg.norm(rel - np.outer(u, d), axis=1)
-        nearer = dist < distance
-        distance[nearer] = dist[nearer]
-        along[nearer] = covered + u[nearer] * length
-        covered += length
+        u = np.clip(rel @ d / (d @ d), 0.0, 1.0)
+        distance = np.minimum(distance, np.linalg.norm(rel - np.outer(u, d), axis=1))
+    progress = LineProgress(points @ flat)
+    along = np.array([progress.update(tip) for tip in tips @ flat])
     uv = uv0 + ((tips - origin) @ R)[:, :2]
     return distance, along, uv
 
