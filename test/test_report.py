@@ -146,6 +146,17 @@ def test_failure_judges_the_recorded_run_on_the_truth_as_the_campaign_does():
                          (1.2, Mode.RETREAT), (1.9, Mode.IDLE)]]
     assert report.summarize(rec, TOOL_X)['failure'] == {
         'reason': 'force_limit', 'mode': 'HOLD', 'phase': ''}
+    # a slide's task failure, then a retreat held on its way: the failsafe that ended the
+    # run, as fly names it (the controller's last failsafe reason), not the task's
+    reasons = ['', 'off_line', 'off_line', 'unreachable', 'unreachable']
+    rec[names.CONTROLLER_STATUS] = [
+        (wall_ns(tc), status(tc, base, mode=mode.value, phase='', success=False,
+                             failsafe_reason=reason))
+        for (tc, mode), reason in zip([(0.3, Mode.SLIDE), (0.6, Mode.RETREAT),
+                                       (1.0, Mode.RETREAT), (1.2, Mode.LAND),
+                                       (1.9, Mode.IDLE)], reasons)]
+    assert report.summarize(rec, TOOL_X)['failure'] == {
+        'reason': 'unreachable', 'mode': 'RETREAT', 'phase': ''}
 
 
 @pytest.mark.parametrize('asked_n', [4.0, 7.5])

@@ -105,9 +105,16 @@ def summarize(rec, tool_tip_x_m):
 def recorded_failure(summary, ctrl):
     """summary.json ``failure``: why the recorded run missed the inspection bar, judged on
     the truth as the in-process runs are (:func:`task_metrics.failure_of`), or None. Without
-    a recorded plan the mission's one touch is judged on the summary's own keys; a failsafe
-    is placed in the mode and phase of the last status before it."""
-    fired = next((i for i, (_, v) in enumerate(ctrl) if v.get('failsafe_reason')), None)
+    a recorded plan the mission's one touch is judged on the summary's own keys; the
+    controller's last failsafe reason (a task's failure writes one too, and a failsafe
+    after it, such as a retreat held on its way, is what ended the run) is placed in the
+    mode and phase of the last status before the statuses that gave it."""
+    fired = None
+    final = ctrl[-1][1].get('failsafe_reason') if ctrl else ''
+    for i in range(len(ctrl) - 1, -1, -1) if final else ():
+        if ctrl[i][1].get('failsafe_reason') != final:
+            break
+        fired = i
     before = ctrl[max(0, fired - 1)][1] if fired is not None else {}
     touch = {'kind': 'touch', 'success': bool(summary['success']), 'reason': '',
              **{k: summary[k] for k in ('poi_error_max_m', 'force_mean_n', 'force_setpoint_n',

@@ -84,7 +84,8 @@ def first_missed_bar(tasks):
 
 def failure_of(result):
     """Why a run missed the inspection bar, as {'reason', 'mode', 'phase'}, or None when it
-    met it: the failsafe that ended it and where it fired, else what kept it from
+    met it: the failsafe that ended it (the controller's last failsafe reason: a task's
+    failure writes one too) and where it fired, else what kept it from
     completing; for a run the controller completed, the first touch that the truth puts
     off the bar (:func:`missed_bar`, in HOLD)."""
     if result['success']:
