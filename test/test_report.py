@@ -436,3 +436,21 @@ def test_a_slide_that_comes_back_on_itself_is_measured_along_its_line():
     assert slide['force_mean_n'] == pytest.approx(5.0)
     _, along, _ = task_metrics.slide_geometry(task, tips, normal)
     assert np.all(np.diff(along) >= 0.0) and along[-1] == pytest.approx(0.9, abs=1e-9)
+
+
+@pytest.mark.parametrize('rounding_s', [-4e-10, 4e-10])
+def test_a_recording_stamped_in_whole_nanoseconds_scores_the_same_samples(rounding_s):
+    """fly scores a task on the controller's float times, the report on the recording's
+    nanosecond stamps: a stamp rounded either way is still the sample of its tick."""
+    t = 10.0 + np.arange(30) * DT
+    push = np.arange(30, dtype=float)      # each sample its own push
+    normal = np.array([-1.0, 0.0, 0.0])
+    task = dict(index=0, kind='touch', target='', force_n=5.0, success=True, reason='',
+                contact_lost=0, t_contact_s=[float(t[10]), float(t[13])],
+                normal_map=normal.tolist())
+    tips = np.zeros((30, 3))
+    flown, recorded = (task_metrics.task_results([task], times, tips, np.outer(push, normal))[0]
+                       for times in (t, t + rounding_s))
+    assert flown['force_mean_n'] == pytest.approx(11.0)      # samples 10, 11 and 12
+    assert recorded['force_mean_n'] == flown['force_mean_n']
+    assert recorded['hold_time_s'] == pytest.approx(flown['hold_time_s'], abs=1e-9)

@@ -107,14 +107,19 @@ def failure_of(result):
     return {'reason': reason, 'mode': where.get('mode'), 'phase': where.get('phase')}
 
 
+# A recording's stamps are whole nanoseconds, a task record's times the controller's own
+# floats: a sample within this of a bound is the sample at it (ticks are 3.3 ms apart).
+STAMP_TOLERANCE_S = 1e-6
+
+
 def pushing(task, t_s):
     """Samples of the task's HOLD or SLIDE: start <= t < end (the end of the data while it
-    had not ended)."""
+    had not ended), to STAMP_TOLERANCE_S."""
     window = task.get('t_contact_s')
     if not window or window[0] is None:
         return np.zeros(t_s.shape, dtype=bool)
     end = np.inf if window[1] is None else window[1]
-    return (t_s >= window[0]) & (t_s < end)
+    return (t_s >= window[0] - STAMP_TOLERANCE_S) & (t_s < end - STAMP_TOLERANCE_S)
 
 
 def _normal(task, wall_normal_map):
