@@ -92,7 +92,10 @@ def test_fly_records_a_bag_that_the_report_reads_and_never_overwrites_it(tmp_pat
         ticks = {c.topic: c.msgcount for c in bag.connections}['/clock']
     assert ticks == flown['ticks']
     code, out, err = refusal(capsys, ['report', str(run)])
-    assert code == 1 and json.loads(out)['failure']['reason'] == 'not_completed', err
+    reported = json.loads(out)
+    assert code == 1 and reported['failure']['reason'] == 'not_completed', err
+    # the mission began on the same tick in both (the recording's statuses come at 10 Hz)
+    assert reported['mission_time_s'] == pytest.approx(flown['mission_time_s'], abs=1e-6)
     recorded = (run / RECORDING_FILE).read_bytes()
     code, out, err = refusal(capsys, argv)
     assert code == 2 and out == '' and len(err) == 1 and 'never overwritten' in err[0], err

@@ -24,7 +24,8 @@ import numpy as np
 from uav_tilt_common import names
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_tools import recording
-from uav_tilt_tools.mission_metrics import MISSION_KEYS, json_number, mission_summary
+from uav_tilt_tools.mission_metrics import (MISSION_KEYS, json_number, mission_summary,
+                                            mode_samples)
 from uav_tilt_tools.task_metrics import failure_of, task_results, with_tasks
 
 RUN_KEYS = ('rtf', 'controller_rate_hz', 'vision_fps', 'vision_latency_ms_p95')
@@ -88,7 +89,7 @@ def summarize(rec, tool_tip_x_m):
     t_push, push, _ = recording.contact_forces(rec)
     t_tip, tips = recording.tool_tips(rec, tool_tip_x_m)
     target = recording.target_pose(rec)
-    summary = mission_summary(recording.modes(ctrl), last, t_push, push, t_tip, tips,
+    summary = mission_summary(mode_samples(ctrl), last, t_push, push, t_tip, tips,
                               *(target[0], target[1][:, 2]) if target is not None
                               else (None, None))
     summary.update(
@@ -123,7 +124,7 @@ def recorded_failure(summary, ctrl):
         **summary, 'tasks': summary['tasks'] if summary['tasks'] is not None else [touch],
         'failsafe_reason': ctrl[fired][1]['failsafe_reason'] if fired is not None else '',
         'failsafe_where': {'mode': before.get('mode'), 'phase': before.get('phase', '')},
-        'mode_history': recording.modes(ctrl)})
+        'mode_history': mode_samples(ctrl)})
 
 
 def task_summaries(rec, tool_tip_x_m):
