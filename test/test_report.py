@@ -401,7 +401,8 @@ def test_per_task_results_from_the_recorded_plan(tmp_path):
     for key in ('poi_error_m', 'force_setpoint_n', 'force_mean_n', 'force_rms_error_n'):
         assert summary[key] == touch[key], key          # the first touch's, at 6 N
     held = push[(t >= HOLD_FIRST) & (t < HOLD_LAST)]
-    assert touch['success'] and touch['target'] == ''
+    # completed by the controller, 5 cm from the point of interest by the truth
+    assert (touch['success'], touch['reason'], touch['target']) == (False, 'off_target', '')
     assert touch['poi_error_m'] == pytest.approx(0.05, abs=1e-9)
     assert touch['force_mean_n'] == pytest.approx(held.mean(), abs=1e-9)
     assert touch['force_rms_error_n'] == pytest.approx(np.sqrt(np.mean((held - 6.0) ** 2)))
@@ -454,3 +455,22 @@ def test_a_recording_stamped_in_whole_nanoseconds_scores_the_same_samples(roundi
     assert flown['force_mean_n'] == pytest.approx(11.0)      # samples 10, 11 and 12
     assert recorded['force_mean_n'] == flown['force_mean_n']
     assert recorded['hold_time_s'] == pytest.approx(flown['hold_time_s'], abs=1e-9)
+
+
+def test_a_touch_completed_off_the_bar_is_no_success():
+    """A push the vehicle cannot reach (its rotors' tilt saturated short of 14 N): the
+    controller completed the hold, the truth puts its mean more than 0.1 N off the task's
+    force; one within the bar stays a success."""
+    t = np.arange(300) * DT
+    normal = np.array([-1.0, 0.0, 0.0])
+    poi = np.array([WALL_X, 0.0, 1.5])
+    targets = {'': (poi, np.column_stack([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], normal]))}
+    results = []
+    for mean_n in (9.6, 14.0 - 0.05):
+        task = dict(index=0, kind='touch', target='', force_n=14.0, success=True, reason='',
+                    contact_lost=0, t_contact_s=[0.0, 1.0], normal_map=normal.tolist())
+        results += task_metrics.task_results([task], t, np.tile(poi, (300, 1)),
+                                             np.outer(np.full(300, mean_n), normal), targets)
+    short, within = results
+    assert (short['success'], short['reason']) == (False, 'force_off_setpoint')
+    assert (within['success'], within['reason']) == (True, '')

@@ -8,7 +8,8 @@ contact_lost, t_contact_s = [start, end] of HOLD or SLIDE, ...).
 
 - touch: over the hold, the tool tip's distance from the target's point of interest along
   the surface (``poi_error_m``, ``poi_error_max_m``), the push's mean and RMS error against
-  the task's force;
+  the task's force; a touch the controller completed that misses the inspection bar
+  (:func:`missed_bar`) is no success, its reason the bar's;
 - slide: over the slide, the push's RMS error, the tool tip's distance from the requested
   line in the wall's plane (``path_rms_error_m``, ``path_max_error_m``), the length of line
   it covered, measured along the line as the mission measures it (``length_m``,
@@ -53,6 +54,11 @@ def task_results(tasks, t_s, tip_map, force_map, targets=None, wall_normal_map=N
             entry.update(target=task.get('target', ''),
                          **_touch(task, t_s[mask], tip_map[mask], force_map[mask],
                                   (targets or {}).get(task.get('target', '')), wall_normal_map))
+            missed = entry['success'] and missed_bar(entry)
+            if missed:
+                # completed by the controller, yet off the bar by the truth (a push that
+                # fell short of its force, a press on a look-alike)
+                entry.update(success=False, reason=missed)
         else:
             normal = _normal(task, wall_normal_map)
             entry.update(_slide(task, t_s[mask], tip_map[mask], force_map[mask] @ normal,
