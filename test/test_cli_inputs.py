@@ -119,8 +119,10 @@ def test_a_bad_plan_file_is_one_line(tmp_path, capsys, plan, words):
 
 @pytest.mark.parametrize('args, words', [
     # a push the touch would not feel, or one over the force limit, as a plan's is refused
-    (['--set', 'contact_force=0'], ["'contact_force' = 0.0", '(1.0, 15.0)']),
-    (['--set', 'contact_force=18'], ["'contact_force' = 18.0", '(1.0, 15.0)']),
+    (['--set', 'contact_force=0'], ["'contact_force' = 0.0", '(1, 9.6)']),
+    (['--set', 'contact_force=18'], ["'contact_force' = 18.0", '(1, 9.6)']),
+    # more than the vehicle pushes (1.6 kg at the impedance law's 6 m/s^2), under the limit
+    (['--set', 'contact_force=12'], ["'contact_force' = 12.0", 'accel_limit_mps2']),
     (['--set', 'contact_force=[1'], ['--set', 'contact_force=[1']),
     (['--set', 'target_source=vision'], ['--target-source']),
     # the plan is --plan's: a second one in --set was left unflown without a word

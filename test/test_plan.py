@@ -13,6 +13,7 @@ import yaml
 from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore, plan_of
+from uav_tilt_control.impedance import ImpedanceConfig
 from uav_tilt_control.mission import MissionConfig
 from uav_tilt_control.plan import LineProgress, Slide, Touch, load_plan, parse_plan
 from uav_tilt_control.site import HINT_ERROR_M, SiteConfig
@@ -23,7 +24,8 @@ from uav_tilt_tools.site_params import ros_arguments, site_overrides
 REPO = pathlib.Path(__file__).resolve().parent.parent
 SCENARIO = REPO / 'config' / 'scenarios' / 'plan.yaml'
 PLAN = REPO / 'config' / 'plans' / 'inspection.yaml'
-FORCES = (MissionConfig().contact_threshold_n, MissionConfig().force_limit_n)
+FORCES = (MissionConfig().contact_threshold_n, MissionConfig().force_limit_n,
+          'mission.contact_threshold_n, mission.force_limit_n')
 
 
 def _site():
@@ -62,8 +64,8 @@ def test_the_shipped_plan_resolves_on_its_wall():
     ([_touch(target='plate_c')], ['tasks[0] (touch)', "'target' = 'plate_c'", 'plate_a']),
     # the message states the range enforced, the mission's (contact threshold, force limit)
     ([_touch(), _slide(force_n=-5.0)], ['tasks[1] (slide)', "'force_n' = -5.0",
-                                        f'({FORCES[0]}, {FORCES[1]})']),
-    ([_touch(force_n=0.5)], ['tasks[0] (touch)', f'({FORCES[0]}, {FORCES[1]})']),
+                                        f'({FORCES[0]:g}, {FORCES[1]:g})']),
+    ([_touch(force_n=0.5)], ['tasks[0] (touch)', f'({FORCES[0]:g}, {FORCES[1]:g})']),
     # a touch is scored by its push over the hold: a hold of 0 s has none
     ([_touch(hold_s=0.0)], ['tasks[0] (touch)', "'hold_s' = 0.0", 'more than 0']),
     ([_touch(force_n=15.0)], ['tasks[0] (touch)', "'force_n' = 15.0", 'force_limit_n']),
@@ -125,6 +127,28 @@ def test_the_default_time_limit_covers_what_the_plan_pushes():
     # the plan of the defaults keeps the per-task limit
     assert default_duration_s(load_plan(PLAN, _site(), FORCES)) == pytest.approx(
         3 * DURATION_S + 1.0 / 0.1 - MissionConfig().hold_time_s)
+
+
+def test_a_push_beyond_what_the_vehicle_pushes_is_refused(tmp_path):
+    """Without contact feedforward the impedance law pushes with the vehicle's mass times
+    its commanded acceleration, whose norm is limited: on a vertical wall 14 N were asked,
+    the push stopped at that product (9.6 N) and the task held on, short of its force."""
+    reach_n = VehicleParams().mass_kg * ImpedanceConfig().accel_limit_mps2
+    assert reach_n < MissionConfig().force_limit_n
+    for kind in (_touch, _slide):
+        with pytest.raises(ConfigError) as err:
+            plan_of(_config(tmp_path, [kind(force_n=reach_n + 0.05)]))
+        assert f'({FORCES[0]:g}, {reach_n:g})' in str(err.value)
+        assert 'accel_limit_mps2' in str(err.value)
+        assert plan_of(_config(tmp_path, [kind(force_n=reach_n - 0.05)]))
+    # the one-touch inspection's contact_force likewise, on the vehicle the core flies
+    with pytest.raises(ConfigError, match="'contact_force'.*accel_limit_mps2"):
+        ControllerCore(VehicleParams(), ControllerConfig(contact_force=reach_n + 0.05))
+    heavier = VehicleParams(mass_kg=2.0 * VehicleParams().mass_kg)
+    assert ControllerCore(heavier, ControllerConfig(contact_force=reach_n + 0.05))
+    # a law that feeds the measured contact force forward is held by the force limit alone
+    assert plan_of(_config(tmp_path, [_touch(force_n=reach_n + 0.05)],
+                           **{'flight.impedance.contact_feedforward': True}))
 
 
 def test_a_line_just_longer_than_the_slides_tolerance_is_taken():

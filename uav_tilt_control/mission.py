@@ -311,7 +311,8 @@ class Mission:
         self.contact_force_n = float(contact_force_n)
         self.k_contact_z_n_per_m = float(k_contact_z_n_per_m)
         check_force("parameter 'contact_force'", self.contact_force_n,
-                    (self.config.contact_threshold_n, self.config.force_limit_n))
+                    (self.config.contact_threshold_n, self.config.force_limit_n,
+                     'mission.contact_threshold_n, mission.force_limit_n'))
         if self.config.target_lost_retreat_s <= self.config.target_lost_hold_s:
             raise ConfigError(
                 f"parameter 'target_lost_retreat_s' = {self.config.target_lost_retreat_s!r} "

@@ -156,12 +156,12 @@ def _listed(array):
 
 
 def check_force(name, force_n, force_range_n):
-    """A push asked for must be felt as contact and stay under the force limit:
-    ``force_range_n`` = (mission.contact_threshold_n, mission.force_limit_n), open."""
-    low, high = force_range_n
+    """A push asked for must lie in the open range ``force_range_n`` = (low, high, what
+    sets them): felt as contact, under the force limit and within what the vehicle pushes
+    (uav_tilt_control.controller_core.force_range_n)."""
+    low, high, limits = force_range_n
     if not low < force_n < high:
-        raise ConfigError(f"{name} = {force_n!r} must be in ({low}, {high}) "
-                          f"(mission.contact_threshold_n, mission.force_limit_n)")
+        raise ConfigError(f"{name} = {force_n!r} must be in ({low:g}, {high:g}) ({limits})")
 
 
 def one_touch_plan(site, force_n, hold_s):
@@ -176,7 +176,8 @@ def load_plan(path, site, force_range_n, lowest_m=None, tolerance_m=None):
     """Read, validate and resolve the plan file ``path`` (see the module docstring).
 
     ``site``: the SiteConfig the plan is checked against (target ids, wall extent);
-    ``force_range_n``: (low, high), the open range a task's push must lie in; ``lowest_m``:
+    ``force_range_n``: (low, high, what sets them), the open range a task's push must lie in
+    (:func:`check_force`); ``lowest_m``:
     the lowest altitude (map z) the mission works at (MissionConfig.lowest_hover_m), which
     a slide's line and a touch's target (its position within the hint's error) must reach;
     ``tolerance_m``: how far the mission lets the tool tip be off a slide's line and short
