@@ -18,6 +18,7 @@ from uav_tilt_tools import campaign as cp
 from uav_tilt_tools import recording
 from uav_tilt_tools.campaign_store import RUNS_FILE, RESULT_FILE, run_dir
 from uav_tilt_tools.mcap_bag import METADATA_FILE, RECORDING_FILE
+from uav_tilt_tools.mission_metrics import mode_samples
 
 # Enough runs that some are still flying when the first is kept, however fast they fly
 # (8 s of sim time takes 1-4 s here).
@@ -190,6 +191,6 @@ def test_record_keeps_one_mcap_per_run_that_the_report_reads(tmp_path):
             assert connections['/clock'].msgcount == run['ticks']
             assert connections['/uav/' + names.GROUND_TRUTH_TARGET].ext.offered_qos_profiles[
                 0].durability == QosDurability.TRANSIENT_LOCAL
-        modes = recording.modes(recording.statuses(rec, names.CONTROLLER_STATUS))
+        modes = mode_samples(recording.statuses(rec, names.CONTROLLER_STATUS))
         assert modes[-1][1] == run['mode_history'][-1][1]
         assert recording.target_pose(rec) is not None

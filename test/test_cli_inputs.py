@@ -92,7 +92,10 @@ def test_fly_records_a_bag_that_the_report_reads_and_never_overwrites_it(tmp_pat
         ticks = {c.topic: c.msgcount for c in bag.connections}['/clock']
     assert ticks == flown['ticks']
     code, out, err = refusal(capsys, ['report', str(run)])
-    assert code == 1 and json.loads(out)['failure']['reason'] == 'not_completed', err
+    reported = json.loads(out)
+    assert code == 1 and reported['failure']['reason'] == 'not_completed', err
+    # the mission began on the same tick in both (the recording's statuses come at 10 Hz)
+    assert reported['mission_time_s'] == pytest.approx(flown['mission_time_s'], abs=1e-6)
     recorded = (run / RECORDING_FILE).read_bytes()
     code, out, err = refusal(capsys, argv)
     assert code == 2 and out == '' and len(err) == 1 and 'never overwritten' in err[0], err
@@ -116,8 +119,10 @@ def test_a_bad_plan_file_is_one_line(tmp_path, capsys, plan, words):
 
 @pytest.mark.parametrize('args, words', [
     # a push the touch would not feel, or one over the force limit, as a plan's is refused
-    (['--set', 'contact_force=0'], ["'contact_force' = 0.0", '(1.0, 15.0)']),
-    (['--set', 'contact_force=18'], ["'contact_force' = 18.0", '(1.0, 15.0)']),
+    (['--set', 'contact_force=0'], ["'contact_force' = 0.0", '(1, 9.6)']),
+    (['--set', 'contact_force=18'], ["'contact_force' = 18.0", '(1, 9.6)']),
+    # more than the vehicle pushes (1.6 kg at the impedance law's 6 m/s^2), under the limit
+    (['--set', 'contact_force=12'], ["'contact_force' = 12.0", 'accel_limit_mps2']),
     (['--set', 'contact_force=[1'], ['--set', 'contact_force=[1']),
     (['--set', 'target_source=vision'], ['--target-source']),
     # the plan is --plan's: a second one in --set was left unflown without a word
@@ -156,6 +161,20 @@ def test_a_bad_option_value_is_refused_by_the_parser(capsys, argv, words):
     code, out, err = refusal(capsys, argv)
     assert code == 2 and out == ''
     assert all(w in err[-1] for w in words) and 'error' in err[-1], err
+
+
+@pytest.mark.parametrize('args', [
+    ['--scenario', 'config/scenarios/plan.yaml', '--plan', 'config/plans/inspection.yaml'],
+    ['--scenario', 'config/scenarios/default.yaml', '--hint', '1.5', '1.5'],
+])
+def test_a_site_value_set_by_the_user_wins_over_the_scenarios(capsys, args):
+    """As launch.sh's --param: on a wall the user says is 1 m wide, a plan's slide at
+    u = 1.3 m and a hint at u = 1.5 m are off it."""
+    code, out, err = refusal(capsys, ['fly', '--target-source', 'ground_truth', '--duration',
+                                      '0.5', *args, '--set', 'site.wall_width_m=1.0'])
+    assert code == 2 and out == '' and len(err) == 1, err
+    assert 'off the wall' in err[0] and (
+        '[-0.5, 0.5]' in err[0] or 'site.wall_width_m 1.0' in err[0]), err
 
 
 def test_a_hint_just_off_the_wall_is_within_its_error(capsys):

@@ -39,6 +39,10 @@ def test_defaults_and_nested_dotted_keys():
     # an integer's finiteness is checked before it is made an int (no OverflowError)
     ({'count': float('inf')}, ["'count'", 'finite']),
     ({'count': float('nan')}, ["'count'", 'finite']),
+    # YAML reads an integer of any size; one beyond a float's range is no OverflowError
+    ({'inner.gain': 10 ** 400}, ["'inner.gain'", '401 digits', 'too large']),
+    ({'count': -10 ** 400}, ["'count'", 'too large']),
+    ({'inner.xyz': [0.0, 10 ** 309, 0.0]}, ["'inner.xyz'", 'too large']),
     # a group is a mapping: 0, [] or '' do not stand for its defaults
     ({'inner': 0}, ["'inner'", 'mapping']),
     ({'inner': []}, ["'inner'", 'mapping']),

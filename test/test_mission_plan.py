@@ -33,8 +33,9 @@ class PlanFlight(Flight):
     ``unseen``: targets vision never finds; ``yaw_error_rad``: added to the odometry's yaw
     while sliding (a tool swung aside)."""
 
-    def __init__(self, plan, config=None, unseen=(), yaw_error_rad=0.0):
-        self.unseen, self.yaw_error_rad = set(unseen), yaw_error_rad
+    def __init__(self, plan, config=None, unseen=(), yaw_error_rad=0.0, stuck=False):
+        self.unseen, self.yaw_error_rad, self.stuck = set(unseen), yaw_error_rad, stuck
+        self._stuck_p_map = None
         super().__init__(config or MissionConfig(search_timeout_s=4.0), target=None, plan=plan,
                          wall=(TARGETS['a'], NORMAL, np.inf))
 
@@ -49,6 +50,11 @@ class PlanFlight(Flight):
         if self.mission.mode == Mode.SLIDE and self.yaw_error_rad:
             state.q_map_base = (Rotation.from_euler('z', self.yaw_error_rad)
                                 * Rotation.from_quat(state.q_map_base)).as_quat()
+        if self.mission.mode == Mode.SLIDE and self.stuck:
+            # odometry sees the vehicle stay where the slide began
+            if self._stuck_p_map is None:
+                self._stuck_p_map = state.p_map.copy()
+            state.p_map = self._stuck_p_map.copy()
         return state
 
     def fly(self):
@@ -160,6 +166,23 @@ def test_a_tool_swung_off_the_line_fails_the_slide_which_lifts_off():
     assert [r.success for r in records[1:]] == [True, True]
     after = flight.modes
     assert after[after.index(Mode.SLIDE) + 1] == Mode.RETREAT
+
+
+@pytest.mark.parametrize('line', [
+    LINE,
+    # up half a metre and back: its end is its start, where the tool tip stays
+    np.array([LINE[0], LINE[0] + [0.0, 0.0, 0.5], LINE[0]]),
+])
+def test_a_tool_tip_that_does_not_follow_the_line_fails_the_slide(line):
+    """Friction may hold the tool tip where it touched while the reference slides on: the
+    line's time running out is no success."""
+    plan = [Slide(line.copy(), NORMAL, 0.1, 5.0), *_plan()[:1]]
+    flight = PlanFlight(plan, stuck=True).fly()
+    records = flight.mission.records
+    assert (records[0].success, records[0].reason) == (False, 'short_of_line'), records
+    assert records[1].success
+    modes = flight.modes
+    assert modes[modes.index(Mode.SLIDE) + 1] == Mode.RETREAT
 
 
 def test_the_force_limit_ends_the_plan():

@@ -13,8 +13,9 @@ import yaml
 from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore, plan_of
+from uav_tilt_control.impedance import ImpedanceConfig
 from uav_tilt_control.mission import MissionConfig
-from uav_tilt_control.plan import Slide, Touch, load_plan, parse_plan
+from uav_tilt_control.plan import LineProgress, Slide, Touch, load_plan, parse_plan
 from uav_tilt_control.site import HINT_ERROR_M, SiteConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.fly import DURATION_S, default_duration_s
@@ -23,7 +24,8 @@ from uav_tilt_tools.site_params import ros_arguments, site_overrides
 REPO = pathlib.Path(__file__).resolve().parent.parent
 SCENARIO = REPO / 'config' / 'scenarios' / 'plan.yaml'
 PLAN = REPO / 'config' / 'plans' / 'inspection.yaml'
-FORCES = (MissionConfig().contact_threshold_n, MissionConfig().force_limit_n)
+FORCES = (MissionConfig().contact_threshold_n, MissionConfig().force_limit_n,
+          'mission.contact_threshold_n, mission.force_limit_n')
 
 
 def _site():
@@ -60,7 +62,12 @@ def test_the_shipped_plan_resolves_on_its_wall():
 @pytest.mark.parametrize('tasks, words', [
     ([], ["'tasks'", 'at least one task']),
     ([_touch(target='plate_c')], ['tasks[0] (touch)', "'target' = 'plate_c'", 'plate_a']),
-    ([_touch(), _slide(force_n=-5.0)], ["tasks[1].slide.force_n", '-5.0', 'range']),
+    # the message states the range enforced, the mission's (contact threshold, force limit)
+    ([_touch(), _slide(force_n=-5.0)], ['tasks[1] (slide)', "'force_n' = -5.0",
+                                        f'({FORCES[0]:g}, {FORCES[1]:g})']),
+    ([_touch(force_n=0.5)], ['tasks[0] (touch)', f'({FORCES[0]:g}, {FORCES[1]:g})']),
+    # a touch is scored by its push over the hold: a hold of 0 s has none
+    ([_touch(hold_s=0.0)], ['tasks[0] (touch)', "'hold_s' = 0.0", 'more than 0']),
     ([_touch(force_n=15.0)], ['tasks[0] (touch)', "'force_n' = 15.0", 'force_limit_n']),
     ([_slide(to_uv_m=[3.0, 2.0])], ['tasks[0] (slide)', "'to_uv_m' = [3.0, 2.0]",
                                     'off the wall']),
@@ -68,13 +75,17 @@ def test_the_shipped_plan_resolves_on_its_wall():
                                                    'off the wall']),
     ([_slide(speed_m_s=0.0)], ['tasks[0].slide.speed_m_s', 'range']),
     ([_slide(to_uv_m=[1.3, 1.0])], ['tasks[0] (slide)', 'repeats']),
+    # a tool tip that never moved would be within the tolerance of the end of a line so short
+    ([_slide(to_uv_m=[1.33, 1.0])], ['tasks[0] (slide)', '0.03 m long',
+                                     'slide_path_tolerance_m']),
     ([{'touch': {'target': 'plate_a'}}], ['tasks[0] (touch)', "'near_uv_m' is required"]),
     ([{'drill': {}}], ['tasks[0]', 'touch', 'slide']),
     ([_touch(hold=3.0)], ["unknown parameter 'tasks[0].touch.hold'"]),
 ])
 def test_a_bad_plan_is_refused_with_one_line(tasks, words):
     with pytest.raises(ConfigError) as err:
-        parse_plan({'tasks': tasks}, _site(), FORCES)
+        parse_plan({'tasks': tasks}, _site(), FORCES,
+                   tolerance_m=MissionConfig().slide_path_tolerance_m)
     message = str(err.value)
     assert '\n' not in message
     for word in words:
@@ -89,14 +100,16 @@ def test_a_plan_below_the_lowest_the_mission_works_at_is_refused(tmp_path):
     margin_m = float(np.random.default_rng().uniform(0.01, 0.1))
     refused = [_slide(from_uv_m=[1.3, lowest_m - margin_m], to_uv_m=[1.3, 2.0]),
                _touch(near_uv_m=[-0.4, lowest_m - HINT_ERROR_M - margin_m])]
-    for task in refused:
-        with pytest.raises(ConfigError, match='below the lowest the mission works at'):
+    # each message states the limit applied to its kind of task
+    for task, limit_m in zip(refused, (lowest_m, lowest_m - HINT_ERROR_M)):
+        with pytest.raises(ConfigError, match=f'below {limit_m:g} m: the lowest the mission '
+                                              f'works at, {lowest_m:g} m'):
             parse_plan({'tasks': [task]}, _site(), FORCES, lowest_m)
     kept = [_slide(from_uv_m=[1.3, lowest_m + margin_m], to_uv_m=[1.3, 2.0]),
             _touch(near_uv_m=[-0.4, lowest_m - HINT_ERROR_M + margin_m])]
     assert len(parse_plan({'tasks': kept}, _site(), FORCES, lowest_m)) == 2
     # the controller checks its plan file so, with its own mission's ground
-    with pytest.raises(ConfigError, match='below the lowest'):
+    with pytest.raises(ConfigError, match='below .* the lowest the mission works at'):
         plan_of(_config(tmp_path, refused[:1]))
     assert plan_of(_config(tmp_path, refused[:1], **{'mission.ground_z_m': -1.0}))
 
@@ -114,6 +127,64 @@ def test_the_default_time_limit_covers_what_the_plan_pushes():
     # the plan of the defaults keeps the per-task limit
     assert default_duration_s(load_plan(PLAN, _site(), FORCES)) == pytest.approx(
         3 * DURATION_S + 1.0 / 0.1 - MissionConfig().hold_time_s)
+
+
+def test_a_push_beyond_what_the_vehicle_pushes_is_refused(tmp_path):
+    """Without contact feedforward the impedance law pushes with the vehicle's mass times
+    its commanded acceleration, whose norm is limited: on a vertical wall 14 N were asked,
+    the push stopped at that product (9.6 N) and the task held on, short of its force."""
+    reach_n = VehicleParams().mass_kg * ImpedanceConfig().accel_limit_mps2
+    assert reach_n < MissionConfig().force_limit_n
+    for kind in (_touch, _slide):
+        with pytest.raises(ConfigError) as err:
+            plan_of(_config(tmp_path, [kind(force_n=reach_n + 0.05)]))
+        assert f'({FORCES[0]:g}, {reach_n:g})' in str(err.value)
+        assert 'accel_limit_mps2' in str(err.value)
+        assert plan_of(_config(tmp_path, [kind(force_n=reach_n - 0.05)]))
+    # the one-touch inspection's contact_force likewise, on the vehicle the core flies
+    with pytest.raises(ConfigError, match="'contact_force'.*accel_limit_mps2"):
+        ControllerCore(VehicleParams(), ControllerConfig(contact_force=reach_n + 0.05))
+    heavier = VehicleParams(mass_kg=2.0 * VehicleParams().mass_kg)
+    assert ControllerCore(heavier, ControllerConfig(contact_force=reach_n + 0.05))
+    # a law that feeds the measured contact force forward is held by the force limit alone
+    assert plan_of(_config(tmp_path, [_touch(force_n=reach_n + 0.05)],
+                           **{'flight.impedance.contact_feedforward': True}))
+
+
+def test_a_line_just_longer_than_the_slides_tolerance_is_taken():
+    tolerance_m = MissionConfig().slide_path_tolerance_m
+    (slide,) = parse_plan({'tasks': [_slide(to_uv_m=[1.3, 1.0 + tolerance_m * 1.01])]},
+                          _site(), FORCES, tolerance_m=tolerance_m)
+    assert slide.length_m > tolerance_m
+
+
+@pytest.mark.parametrize('line, tips, along', [
+    # a tip that stays where it started has come nowhere, even where the line ends there
+    ([[0.0, 1.0], [0.0, 1.5], [0.0, 1.0]], [[0.0, 1.0]] * 5, 0.0),
+    # nor one that stays on the line past its start
+    ([[0.0, 1.0], [0.0, 2.0]], [[0.01, 1.5]] * 100, 0.5),
+    # up and back: the way back counts on the way back, not as a return to the start
+    ([[0.0, 1.0], [0.0, 1.5], [0.0, 1.0]],
+     [[0.001, v] for v in (*np.linspace(1.0, 1.5, 101), *np.linspace(1.5, 1.1, 81))], 0.9),
+    # an L, its corner cut by 1 cm: the nearest point of each leg
+    ([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]],
+     [[u, 0.0] for u in np.linspace(0.0, 0.99, 100)] + [[0.99, 0.01]]
+     + [[1.0, v] for v in np.linspace(0.02, 0.6, 59)], 1.6),
+])
+def test_the_progress_along_a_line_follows_it_leg_by_leg(line, tips, along):
+    progress = LineProgress(line)
+    for tip in tips:
+        progress.update(tip)
+    assert progress.along_m == pytest.approx(along, abs=1e-9)
+
+
+def test_a_touch_on_a_site_without_target_ids_says_a_target_needs_an_id():
+    """A scenario whose one target has no id (default.yaml) gives the site no ids."""
+    site = _site()
+    site.target_ids = []
+    with pytest.raises(ConfigError) as err:
+        parse_plan({'tasks': [_touch()]}, site, FORCES)
+    assert "target objects need" in str(err.value) and "'id'" in str(err.value)
 
 
 def test_a_slide_needs_the_surveyed_wall():

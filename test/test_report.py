@@ -20,7 +20,7 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.controller_node import _loop_stats
 from uav_tilt_common.modes import Mode
-from uav_tilt_tools import recording, report
+from uav_tilt_tools import recording, report, task_metrics
 from uav_tilt_tools.mcap_bag import McapBag
 from uav_tilt_tools.report_plots import write_plots
 
@@ -146,6 +146,17 @@ def test_failure_judges_the_recorded_run_on_the_truth_as_the_campaign_does():
                          (1.2, Mode.RETREAT), (1.9, Mode.IDLE)]]
     assert report.summarize(rec, TOOL_X)['failure'] == {
         'reason': 'force_limit', 'mode': 'HOLD', 'phase': ''}
+    # a slide's task failure, then a retreat held on its way: the failsafe that ended the
+    # run, as fly names it (the controller's last failsafe reason), not the task's
+    reasons = ['', 'off_line', 'off_line', 'unreachable', 'unreachable']
+    rec[names.CONTROLLER_STATUS] = [
+        (wall_ns(tc), status(tc, base, mode=mode.value, phase='', success=False,
+                             failsafe_reason=reason))
+        for (tc, mode), reason in zip([(0.3, Mode.SLIDE), (0.6, Mode.RETREAT),
+                                       (1.0, Mode.RETREAT), (1.2, Mode.LAND),
+                                       (1.9, Mode.IDLE)], reasons)]
+    assert report.summarize(rec, TOOL_X)['failure'] == {
+        'reason': 'unreachable', 'mode': 'RETREAT', 'phase': ''}
 
 
 @pytest.mark.parametrize('asked_n', [4.0, 7.5])
@@ -390,7 +401,8 @@ def test_per_task_results_from_the_recorded_plan(tmp_path):
     for key in ('poi_error_m', 'force_setpoint_n', 'force_mean_n', 'force_rms_error_n'):
         assert summary[key] == touch[key], key          # the first touch's, at 6 N
     held = push[(t >= HOLD_FIRST) & (t < HOLD_LAST)]
-    assert touch['success'] and touch['target'] == ''
+    # completed by the controller, 5 cm from the point of interest by the truth
+    assert (touch['success'], touch['reason'], touch['target']) == (False, 'off_target', '')
     assert touch['poi_error_m'] == pytest.approx(0.05, abs=1e-9)
     assert touch['force_mean_n'] == pytest.approx(held.mean(), abs=1e-9)
     assert touch['force_rms_error_n'] == pytest.approx(np.sqrt(np.mean((held - 6.0) ** 2)))
@@ -403,3 +415,62 @@ def test_per_task_results_from_the_recorded_plan(tmp_path):
     assert slide['force_rms_error_n'] == pytest.approx(np.sqrt(np.mean((slid - 5.0) ** 2)))
     written = write_plots(rec, str(tmp_path), TOOL_X)
     assert str(tmp_path / 'slides.png') in written
+
+
+def test_a_slide_that_comes_back_on_itself_is_measured_along_its_line():
+    """Up 0.5 m and back down 0.4 m: 0.9 m of its 1 m line covered, though the tip ends
+    0.1 m from where it began; the plot's axis along the line does not fold either."""
+    start = np.array([WALL_X, 1.3, 1.0])
+    line = [start, start + [0.0, 0.0, 0.5], start]
+    heights = np.concatenate((np.linspace(0.0, 0.5, 151), np.linspace(0.5, 0.1, 121)[1:]))
+    t = np.arange(len(heights)) * DT
+    tips = start + np.outer(heights, [0.0, 0.0, 1.0]) + [-0.004, 0.0, 0.0]  # pushed in
+    task = dict(index=0, kind='slide', force_n=5.0, success=True, reason='', contact_lost=0,
+                t_contact_s=[0.0, t[-1] + DT], points_map=[p.tolist() for p in line],
+                normal_map=[-1.0, 0.0, 0.0], length_m=1.0,
+                points_uv=[[1.3, 1.0], [1.3, 1.5], [1.3, 1.0]])
+    normal = np.array([-1.0, 0.0, 0.0])
+    (slide,) = task_metrics.task_results([task], t, tips, np.outer(np.full(len(t), 5.0),
+                                                                   normal))
+    assert slide['length_m'] == pytest.approx(0.9, abs=1e-9)
+    assert slide['path_max_error_m'] == pytest.approx(0.0, abs=1e-12)
+    assert slide['force_mean_n'] == pytest.approx(5.0)
+    _, along, _ = task_metrics.slide_geometry(task, tips, normal)
+    assert np.all(np.diff(along) >= 0.0) and along[-1] == pytest.approx(0.9, abs=1e-9)
+
+
+@pytest.mark.parametrize('rounding_s', [-4e-10, 4e-10])
+def test_a_recording_stamped_in_whole_nanoseconds_scores_the_same_samples(rounding_s):
+    """fly scores a task on the controller's float times, the report on the recording's
+    nanosecond stamps: a stamp rounded either way is still the sample of its tick."""
+    t = 10.0 + np.arange(30) * DT
+    push = np.arange(30, dtype=float)      # each sample its own push
+    normal = np.array([-1.0, 0.0, 0.0])
+    task = dict(index=0, kind='touch', target='', force_n=5.0, success=True, reason='',
+                contact_lost=0, t_contact_s=[float(t[10]), float(t[13])],
+                normal_map=normal.tolist())
+    tips = np.zeros((30, 3))
+    flown, recorded = (task_metrics.task_results([task], times, tips, np.outer(push, normal))[0]
+                       for times in (t, t + rounding_s))
+    assert flown['force_mean_n'] == pytest.approx(11.0)      # samples 10, 11 and 12
+    assert recorded['force_mean_n'] == flown['force_mean_n']
+    assert recorded['hold_time_s'] == pytest.approx(flown['hold_time_s'], abs=1e-9)
+
+
+def test_a_touch_completed_off_the_bar_is_no_success():
+    """A push the vehicle cannot reach (its rotors' tilt saturated short of 14 N): the
+    controller completed the hold, the truth puts its mean more than 0.1 N off the task's
+    force; one within the bar stays a success."""
+    t = np.arange(300) * DT
+    normal = np.array([-1.0, 0.0, 0.0])
+    poi = np.array([WALL_X, 0.0, 1.5])
+    targets = {'': (poi, np.column_stack([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], normal]))}
+    results = []
+    for mean_n in (9.6, 14.0 - 0.05):
+        task = dict(index=0, kind='touch', target='', force_n=14.0, success=True, reason='',
+                    contact_lost=0, t_contact_s=[0.0, 1.0], normal_map=normal.tolist())
+        results += task_metrics.task_results([task], t, np.tile(poi, (300, 1)),
+                                             np.outer(np.full(300, mean_n), normal), targets)
+    short, within = results
+    assert (short['success'], short['reason']) == (False, 'force_off_setpoint')
+    assert (within['success'], within['reason']) == (True, '')

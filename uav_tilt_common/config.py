@@ -61,14 +61,20 @@ def _check_scalar(name: str, value: Any, default: Any, meta: Mapping[str, Any]) 
     if isinstance(default, (int, float)):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"parameter '{name}' = {value!r} must be a number")
-        if not math.isfinite(value):
+        try:
+            as_float = float(value)
+        except OverflowError:   # an integer of more than ~308 digits (YAML reads any size)
+            digits = int(int(value).bit_length() * math.log10(2.0)) + 1
+            raise ConfigError(f"parameter '{name}' = an integer of about {digits} digits is "
+                              f"too large for a number") from None
+        if not math.isfinite(as_float):
             raise ConfigError(f"parameter '{name}' = {value!r} must be finite")
         if isinstance(default, int) and not isinstance(default, bool):
-            if float(value) != int(value):
+            if as_float != int(value):
                 raise ConfigError(f"parameter '{name}' = {value!r} must be an integer")
             value = int(value)
         else:
-            value = float(value)
+            value = as_float
         lo, hi = meta.get('lo'), meta.get('hi')
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise ConfigError(f"parameter '{name}' = {value!r} is out of range [{lo}, {hi}]")

@@ -50,21 +50,37 @@ class ControllerConfig:
     site: SiteConfig = nested(SiteConfig)
 
 
-def plan_of(cfg):
-    """The tasks that ``inspect`` runs with ControllerConfig ``cfg``: the plan file's,
-    validated against the site, or the one-touch inspection (ConfigError when bad)."""
+def force_range_n(cfg, vehicle):
+    """(low, high, what sets them): the open range of a push asked for (``contact_force``,
+    a plan's ``force_n``) with ControllerConfig ``cfg`` on ``vehicle``. It must be felt as
+    contact and stay under the force limit; and without contact feedforward the impedance
+    law pushes with the vehicle's mass times its commanded acceleration, whose norm is
+    limited: a push beyond that is never reached."""
+    m, impedance = cfg.mission, cfg.flight.impedance
+    reach_n = vehicle.mass_kg * impedance.accel_limit_mps2
+    if not impedance.contact_feedforward and reach_n < m.force_limit_n:
+        return (m.contact_threshold_n, reach_n, 'mission.contact_threshold_n, the most the '
+                'vehicle pushes: vehicle.mass_kg x flight.impedance.accel_limit_mps2')
+    return m.contact_threshold_n, m.force_limit_n, 'mission.contact_threshold_n, ' \
+        'mission.force_limit_n'
+
+
+def plan_of(cfg, vehicle=None):
+    """The tasks that ``inspect`` runs with ControllerConfig ``cfg`` on ``vehicle``
+    (default VehicleParams()): the plan file's, validated against the site, or the one-touch
+    inspection (ConfigError when bad)."""
     if cfg.autostart == 'plan' and not cfg.plan_file:
         raise ConfigError("parameter 'autostart' = 'plan' needs 'plan_file'")
     if cfg.autostart == 'inspect' and cfg.plan_file:
         raise ConfigError(f"parameter 'plan_file' = {cfg.plan_file!r}: autostart 'inspect' is "
                           f"the one-touch inspection; a plan file runs with 'plan'")
     m = cfg.mission
-    force_range_n = (m.contact_threshold_n, m.force_limit_n)
+    forces = force_range_n(cfg, vehicle or VehicleParams())
     if not cfg.plan_file:
-        check_force("parameter 'contact_force'", cfg.contact_force, force_range_n)
+        check_force("parameter 'contact_force'", cfg.contact_force, forces)
         return one_touch_plan(cfg.site.check(), cfg.contact_force, m.hold_time_s)
-    return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, force_range_n,
-                     m.lowest_hover_m())
+    return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, forces,
+                     m.lowest_hover_m(), m.slide_path_tolerance_m)
 
 
 class ControllerCore:
@@ -80,7 +96,7 @@ class ControllerCore:
         self.estimator = TargetEstimator(cfg.estimator, vehicle.camera_in_base())
         self.estimator.hint_map = cfg.site.target_hint_map()
         self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z,
-                               drop_target=self.estimator.reset, plan=plan_of(cfg),
+                               drop_target=self.estimator.reset, plan=plan_of(cfg, vehicle),
                                on_task=self._on_task)
         self._odom: VehicleState | None = None
         self._R_map_base: np.ndarray | None = None  # of the odometry, on first use

@@ -7,11 +7,12 @@ push; a slide APPROACHes the start of its line on the site's wall, makes CONTACT
 SLIDEs along the line; both RETREAT to the standoff. After the last task it LANDs -> IDLE.
 TARGET_LOST holds while the target is not seen, FAILSAFE_LAND descends blind on stale
 odometry (PX4's failsafes). A task that fails (its target never found or lost, no contact,
-contact lost, the tool off the line) is recorded with its reason and the plan goes on; the
-force limit and stale odometry end the plan. Free flight uses the map frame; near the wall
-the target frame t (z_t = surface normal). References are uav_tilt_control.trajectory
-segments, so that lambda_d, dlambda_d and ddlambda_d stay consistent. Each mode's entry and
-tick are in the table :data:`MODES` at the end of this module.
+contact lost, the tool off the line or short of its end) is recorded with its reason and
+the plan goes on; the force limit and stale odometry end the plan. Free flight uses the map
+frame; near the wall the target frame t (z_t = surface normal). References are
+uav_tilt_control.trajectory segments, so that lambda_d, dlambda_d and ddlambda_d stay
+consistent. Each mode's entry and tick are in the table :data:`MODES` at the end of this
+module.
 """
 import collections
 import dataclasses
@@ -26,7 +27,7 @@ from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
 from uav_tilt_control.impedance import ImpedanceConfig, contact_depth_for_force
 from uav_tilt_control.lowpass import lowpass_weight
-from uav_tilt_control.plan import Slide, Touch, check_force
+from uav_tilt_control.plan import LineProgress, Slide, Touch, check_force
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.trajectory import MIN_JERK_PEAK, MinJerk, PolylineCruise, Ramp
 from uav_tilt_control.types import ImpedanceSetpoint
@@ -186,7 +187,7 @@ class MissionConfig:
     look_distance_m: float = param(1.5, lo=0.3, hi=20.0)
     # SLIDE: the tool tip's speed rises to the task's and comes down at the end of each leg
     # with at most this acceleration; the task fails once the tool tip (odometry) is this far
-    # off the line, in the wall's plane.
+    # off the line, in the wall's plane, or ends this far short of the line's end, along it.
     slide_accel_m_s2: float = param(0.1, lo=0.005, hi=2.0)
     slide_path_tolerance_m: float = param(0.05, lo=0.001, hi=1.0)
 
@@ -310,7 +311,8 @@ class Mission:
         self.contact_force_n = float(contact_force_n)
         self.k_contact_z_n_per_m = float(k_contact_z_n_per_m)
         check_force("parameter 'contact_force'", self.contact_force_n,
-                    (self.config.contact_threshold_n, self.config.force_limit_n))
+                    (self.config.contact_threshold_n, self.config.force_limit_n,
+                     'mission.contact_threshold_n, mission.force_limit_n'))
         if self.config.target_lost_retreat_s <= self.config.target_lost_hold_s:
             raise ConfigError(
                 f"parameter 'target_lost_retreat_s' = {self.config.target_lost_retreat_s!r} "
@@ -1053,6 +1055,7 @@ class Mission:
         points_t[:, 2] = depth_z
         self._traj = PolylineCruise(self._now_s, points_t, task.speed_m_s, cfg.slide_accel_m_s2)
         self._slide_line_t = points_t[:, :2].copy()
+        self._slide_progress = LineProgress(self._slide_line_t)
         self._event('sliding')
 
     def _tool_tip_t(self):
@@ -1065,10 +1068,17 @@ class Mission:
         self._regulate_push(f_n)
         # the tool tip as odometry sees it, against the line in the wall's plane
         tip_t = self._tool_tip_t()[:2]
-        if _distance_to_polyline(tip_t, self._slide_line_t) > self.config.slide_path_tolerance_m:
+        tolerance_m = self.config.slide_path_tolerance_m
+        progress = self._slide_progress
+        progress.update(tip_t)
+        if _distance_to_polyline(tip_t, self._slide_line_t) > tolerance_m:
             self._fail_task('off_line')
         elif self._traj.done(self._now_s):
-            self._end_push('line complete')
+            if progress.length_m - progress.along_m > tolerance_m:
+                # the line's time is up and the tool tip did not follow it (held by friction)
+                self._fail_task('short_of_line')
+            else:
+                self._end_push('line complete')
 
     def _enter_target_lost(self, previous, target):
         self._resume_mode = previous

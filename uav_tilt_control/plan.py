@@ -29,8 +29,8 @@ class TouchTask:
 
     target: str = param('')
     near_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
-    force_n: float = param(5.0, lo=0.0, hi=20.0)
-    hold_s: float = param(5.0, lo=0.0, hi=600.0)
+    force_n: float = param(5.0)     # range: check_force, from the mission's config
+    hold_s: float = param(5.0, hi=600.0)    # more than 0: see _resolve
 
 
 @dataclasses.dataclass
@@ -41,7 +41,7 @@ class SlideTask:
     via_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, item_length=2)
     to_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
     speed_m_s: float = param(0.1, lo=0.005, hi=0.5)
-    force_n: float = param(5.0, lo=0.0, hi=20.0)
+    force_n: float = param(5.0)     # range: check_force, from the mission's config
 
     def points_uv(self):
         """The polyline's vertices, from first to last."""
@@ -108,17 +108,60 @@ class Slide:
                     normal_map=_listed(self.normal_map), length_m=self.length_m)
 
 
+class LineProgress:
+    """How far along a polyline a point that follows it has come, measured along the line.
+
+    A cursor that starts at the point of the line nearest the first position (the first
+    such point where several are), then only moves forward, each :meth:`update` to the point
+    nearest the new position within ``WINDOW_M`` ahead of it: a line that comes back on
+    itself is followed leg by leg (the nearest point of the whole line would fold it back),
+    and a point that stays where it started stays there. The vertices and positions are
+    points of one space (2-D in the wall's plane, or 3-D already projected onto it).
+    """
+
+    # farther than the tool tip moves between two samples (at most 0.5 m/s: 1.7 mm a
+    # control tick)
+    WINDOW_M = 0.02
+
+    def __init__(self, vertices):
+        self._points = np.asarray(vertices, dtype=float)
+        legs = np.linalg.norm(np.diff(self._points, axis=0), axis=1)
+        self._starts = np.concatenate(([0.0], np.cumsum(legs)))
+        self.length_m = float(self._starts[-1])
+        self.along_m = None     # before the first position
+
+    def update(self, p):
+        """Move the cursor for position ``p``; returns how far along the line it is [m]."""
+        p = np.asarray(p, dtype=float)
+        if self.along_m is None:
+            s0, s1 = 0.0, self.length_m
+        else:
+            s0, s1 = self.along_m, min(self.along_m + self.WINDOW_M, self.length_m)
+        best_m, best_s = np.inf, s0
+        for k in range(len(self._points) - 1):
+            a_s, b_s = self._starts[k], self._starts[k + 1]
+            if b_s < s0 or a_s > s1:
+                continue
+            a, d, leg = self._points[k], self._points[k + 1] - self._points[k], b_s - a_s
+            u = min(max(float((p - a) @ d) / leg, s0 - a_s, 0.0), s1 - a_s, leg)
+            distance = float(np.linalg.norm(p - a - d * (u / leg)))
+            if distance < best_m:
+                best_m, best_s = distance, float(a_s + u)
+        self.along_m = best_s
+        return best_s
+
+
 def _listed(array):
     return None if array is None else np.asarray(array, dtype=float).tolist()
 
 
 def check_force(name, force_n, force_range_n):
-    """A push asked for must be felt as contact and stay under the force limit:
-    ``force_range_n`` = (mission.contact_threshold_n, mission.force_limit_n), open."""
-    low, high = force_range_n
+    """A push asked for must lie in the open range ``force_range_n`` = (low, high, what
+    sets them): felt as contact, under the force limit and within what the vehicle pushes
+    (uav_tilt_control.controller_core.force_range_n)."""
+    low, high, limits = force_range_n
     if not low < force_n < high:
-        raise ConfigError(f"{name} = {force_n!r} must be in ({low}, {high}) "
-                          f"(mission.contact_threshold_n, mission.force_limit_n)")
+        raise ConfigError(f"{name} = {force_n!r} must be in ({low:g}, {high:g}) ({limits})")
 
 
 def one_touch_plan(site, force_n, hold_s):
@@ -129,25 +172,28 @@ def one_touch_plan(site, force_n, hold_s):
                   list(site.target_hint_uv_m) or None)]
 
 
-def load_plan(path, site, force_range_n, lowest_m=None):
+def load_plan(path, site, force_range_n, lowest_m=None, tolerance_m=None):
     """Read, validate and resolve the plan file ``path`` (see the module docstring).
 
     ``site``: the SiteConfig the plan is checked against (target ids, wall extent);
-    ``force_range_n``: (low, high), the open range a task's push must lie in; ``lowest_m``:
+    ``force_range_n``: (low, high, what sets them), the open range a task's push must lie in
+    (:func:`check_force`); ``lowest_m``:
     the lowest altitude (map z) the mission works at (MissionConfig.lowest_hover_m), which
-    a slide's line and a touch's target (its position within the hint's error) must reach.
+    a slide's line and a touch's target (its position within the hint's error) must reach;
+    ``tolerance_m``: how far the mission lets the tool tip be off a slide's line and short
+    of its end (MissionConfig.slide_path_tolerance_m), which a line must be longer than.
     """
     try:
         data = read_yaml(path)
     except ConfigError as err:
         raise ConfigError(f"plan_file '{path}': cannot be read: {err}") from None
     try:
-        return parse_plan(data, site, force_range_n, lowest_m)
+        return parse_plan(data, site, force_range_n, lowest_m, tolerance_m)
     except ConfigError as err:
         raise ConfigError(f"plan_file '{path}': {err}") from None
 
 
-def parse_plan(data, site, force_range_n, lowest_m=None):
+def parse_plan(data, site, force_range_n, lowest_m=None, tolerance_m=None):
     """Validate and resolve plan ``data`` (as loaded from YAML); see :func:`load_plan`."""
     if not isinstance(data, dict) or set(data) != {'tasks'}:
         keys = sorted(map(str, data)) if isinstance(data, dict) else data
@@ -158,11 +204,11 @@ def parse_plan(data, site, force_range_n, lowest_m=None):
     if not entries:
         raise ConfigError("'tasks' is empty: a plan needs at least one task")
     site.check()
-    return [_resolve(i, entry, site, force_range_n, lowest_m)
+    return [_resolve(i, entry, site, force_range_n, lowest_m, tolerance_m)
             for i, entry in enumerate(entries)]
 
 
-def _resolve(i, entry, site, force_range_n, lowest_m):
+def _resolve(i, entry, site, force_range_n, lowest_m, tolerance_m):
     where = f'tasks[{i}]'
     if not isinstance(entry, dict) or len(entry) != 1 or next(iter(entry)) not in KINDS:
         raise ConfigError(f"{where} = {entry!r} must be one of "
@@ -194,11 +240,20 @@ def _resolve(i, entry, site, force_range_n, lowest_m):
                if site.point_map(uv)[2] + slack_m < lowest_m]
         if low:
             name, uv = low[0]
+            slack = f" less the hint's error, {slack_m:g} m" if slack_m else ''
             raise ConfigError(f"{where}: '{name}' = {uv!r} is at z = "
-                              f"{site.point_map(uv)[2]:.2f} m, below the lowest the mission "
-                              f"works at, {lowest_m:g} m (mission.ground_z_m + 2 "
-                              f"mission.land_detect_height_m)")
+                              f"{site.point_map(uv)[2]:.2f} m, below {lowest_m - slack_m:g} m: "
+                              f"the lowest the mission works at, {lowest_m:g} m "
+                              f"(mission.ground_z_m + 2 mission.land_detect_height_m){slack}")
     if kind == 'touch':
+        if task.hold_s <= 0.0:
+            raise ConfigError(f"{where}: 'hold_s' = {task.hold_s!r} must be more than 0: a "
+                              f"touch is scored by its push over the hold")
+        if not site.target_ids:
+            raise ConfigError(f"{where}: 'target' = {task.target!r}: the site names no "
+                              f"target (site.target_ids is empty); a plan names a target "
+                              f"by its 'id', which a scenario's target objects need "
+                              f"(e.g. id: plate_a)")
         if task.target not in site.target_ids:
             raise ConfigError(f"{where}: 'target' = {task.target!r} is not one of "
                               f"site.target_ids {list(site.target_ids)!r}")
@@ -209,8 +264,14 @@ def _resolve(i, entry, site, force_range_n, lowest_m):
         if np.allclose(points[k], points[k - 1]):
             raise ConfigError(f"{where}: point {k} of the line {points!r} repeats the one "
                               f"before it")
-    return Slide(np.array([site.point_map(p) for p in points]), site.normal_map(),
-                 task.speed_m_s, task.force_n, points)
+    slide = Slide(np.array([site.point_map(p) for p in points]), site.normal_map(),
+                  task.speed_m_s, task.force_n, points)
+    if tolerance_m is not None and slide.length_m <= tolerance_m:
+        # a tool tip that never moved would be within the tolerance of its end
+        raise ConfigError(f"{where}: the line {points!r} is {slide.length_m:.3g} m long, no "
+                          f"longer than the tolerance the slide is held to, {tolerance_m:g} m "
+                          f"(mission.slide_path_tolerance_m)")
+    return slide
 
 
 def _points_named(task):

@@ -86,8 +86,9 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
 
 def check_plan(scenario, plan_file, overrides=None):
     """Validate ``plan_file`` against the site of ``scenario`` (ConfigError when bad);
-    returns the controller overrides that fly it."""
-    overrides = {**(overrides or {}), **site_overrides(scenario), 'plan_file': plan_file}
+    returns the controller overrides that fly it: the scenario's site, where ``overrides``
+    (the user's) do not say otherwise."""
+    overrides = {**site_overrides(scenario), **(overrides or {}), 'plan_file': plan_file}
     plan_of(from_dict(ControllerConfig, overrides))
     return overrides
 
@@ -162,7 +163,9 @@ def _run(args):
             raise ConfigError('--hint is where the one-touch inspection looks; a plan\'s '
                               'touches say it in their near_uv_m')
         if args.hint is not None:
-            overrides.update(site_overrides(scenario, args.hint))
+            # the user's --set site.* wins over the scenario's, as launch.sh's --param
+            overrides = {**site_overrides(scenario), **overrides,
+                         'site.target_hint_uv_m': [float(v) for v in args.hint]}
         if args.plan:
             overrides = check_plan(scenario, args.plan, overrides)
         plan_of(from_dict(ControllerConfig, overrides))     # one clear line when bad

@@ -15,7 +15,7 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_common.modes import Mode
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
-from uav_tilt_tools.mission_metrics import mission_summary, push_along_normal
+from uav_tilt_tools.mission_metrics import mission_summary, mode_samples, push_along_normal
 from uav_tilt_tools.task_metrics import task_results, with_tasks
 
 
@@ -73,7 +73,8 @@ class Flight:
                                          sensors.accel_m_s2)
         self.tick_s.append(time.perf_counter() - start)
         truth = plant.state()
-        self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'], p_map=truth.p_map,
+        self.log.append(dict(t_s=sensors.t_s, mode=self.status['mode'],
+                             time_in_mode_s=self.status['time_in_mode_s'], p_map=truth.p_map,
                              q_map_base=truth.q_map_base, tip_map=plant.tool_tip_map(),
                              push_n=self._true_push_n(sensors.in_contact),
                              ft_force_ee_n=sensors.ee_force_n,
@@ -117,15 +118,16 @@ def mission_result(flight):
     modes = [(entry['t_s'], entry['mode']) for entry in log]
     history = [modes[0]] + [modes[i] for i in range(1, len(modes))
                             if modes[i][1] != modes[i - 1][1]]
+    t_log = [e['t_s'] for e in log]
     world = flight.plant.world
     # the push on the target's surface; a world without a target has only its wall
     R_surface = world.R_map_target if world.R_map_target is not None else world.R_map_wall
     push = [push_along_normal(quat_to_matrix(e['q_map_base']), e['ft_force_ee_n'], R_surface)
             for e in log]
     normal = world.R_map_target[:, 2] if world.R_map_target is not None else None
-    t_log = [e['t_s'] for e in log]
-    result = mission_summary(modes, flight.status, t_log, push, t_log,
-                             [e['tip_map'] for e in log], world.target_poi_map, normal)
+    result = mission_summary(mode_samples([(e['t_s'], e) for e in log]), flight.status,
+                             t_log, push, t_log, [e['tip_map'] for e in log],
+                             world.target_poi_map, normal)
     reason = flight.status.get('failsafe_reason', '')
     events = flight.core.mission.events
     fired = [e for e in events if reason and e['reason'] == reason]

@@ -17,7 +17,9 @@ true tool tip. Each key means one thing (DESIGN section 7):
 - ``hold_time_s``: sim time spent in HOLD; ``mission_time_s``: from leaving IDLE to being
   back in IDLE (or to the last sample).
 
-HOLD is each run of consecutive samples in that mode, from its first to its last sample.
+The modes are samples of the controller's status (:func:`mode_samples`: each tick in
+process, 10 Hz in a recording) with the time each mode was entered. HOLD is each run of
+consecutive samples in that mode, from its first to its last sample.
 """
 import math
 
@@ -28,6 +30,23 @@ from uav_tilt_common.modes import NOT_FLYING, Mode
 MISSION_KEYS = ('success', 'poi_error_m', 'poi_error_max_m', 'force_setpoint_n',
                 'force_mean_n', 'force_rms_error_n', 'max_force_n', 'contact_lost',
                 'hold_time_s', 'mission_time_s')
+
+
+def mode_samples(statuses):
+    """[(t_s, mode)] of the controller's ``(t_s, status)``, with a sample at the time a
+    mode was entered (its ``time_in_mode_s`` before the first status that shows it, no
+    earlier than the status before): a recording's statuses come at 10 Hz, the controller
+    changes mode on a control tick, and the runner's and the recording's modes then start
+    and end on the same tick."""
+    out = []
+    for t, values in statuses:
+        mode, since = values.get('mode'), json_number(values.get('time_in_mode_s'))
+        if out and out[-1][1] != mode and since is not None:
+            entered = max(t - since, out[-1][0])
+            if entered < t:
+                out.append((entered, mode))
+        out.append((t, mode))
+    return out
 
 
 def runs_of_mode(modes, mode):

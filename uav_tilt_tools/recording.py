@@ -185,11 +185,6 @@ def statuses(rec, topic):
     return [(stamp_s(m), diagnostics_values(m)) for _, m in rec.get(topic, ()) if m.status]
 
 
-def modes(ctrl):
-    """[(t_s, mode)] of controller statuses."""
-    return [(t, values.get('mode')) for t, values in ctrl]
-
-
 def _pose(pose):
     p, o = pose.position, pose.orientation
     return np.array([p.x, p.y, p.z]), quat_to_matrix(np.array([o.x, o.y, o.z, o.w]))

@@ -24,7 +24,8 @@ import numpy as np
 from uav_tilt_common import names
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_tools import recording
-from uav_tilt_tools.mission_metrics import MISSION_KEYS, json_number, mission_summary
+from uav_tilt_tools.mission_metrics import (MISSION_KEYS, json_number, mission_summary,
+                                            mode_samples)
 from uav_tilt_tools.task_metrics import failure_of, task_results, with_tasks
 
 RUN_KEYS = ('rtf', 'controller_rate_hz', 'vision_fps', 'vision_latency_ms_p95')
@@ -88,7 +89,7 @@ def summarize(rec, tool_tip_x_m):
     t_push, push, _ = recording.contact_forces(rec)
     t_tip, tips = recording.tool_tips(rec, tool_tip_x_m)
     target = recording.target_pose(rec)
-    summary = mission_summary(recording.modes(ctrl), last, t_push, push, t_tip, tips,
+    summary = mission_summary(mode_samples(ctrl), last, t_push, push, t_tip, tips,
                               *(target[0], target[1][:, 2]) if target is not None
                               else (None, None))
     summary.update(
@@ -105,9 +106,16 @@ def summarize(rec, tool_tip_x_m):
 def recorded_failure(summary, ctrl):
     """summary.json ``failure``: why the recorded run missed the inspection bar, judged on
     the truth as the in-process runs are (:func:`task_metrics.failure_of`), or None. Without
-    a recorded plan the mission's one touch is judged on the summary's own keys; a failsafe
-    is placed in the mode and phase of the last status before it."""
-    fired = next((i for i, (_, v) in enumerate(ctrl) if v.get('failsafe_reason')), None)
+    a recorded plan the mission's one touch is judged on the summary's own keys; the
+    controller's last failsafe reason (a task's failure writes one too, and a failsafe
+    after it, such as a retreat held on its way, is what ended the run) is placed in the
+    mode and phase of the last status before the statuses that gave it."""
+    fired = None
+    final = ctrl[-1][1].get('failsafe_reason') if ctrl else ''
+    for i in range(len(ctrl) - 1, -1, -1) if final else ():
+        if ctrl[i][1].get('failsafe_reason') != final:
+            break
+        fired = i
     before = ctrl[max(0, fired - 1)][1] if fired is not None else {}
     touch = {'kind': 'touch', 'success': bool(summary['success']), 'reason': '',
              **{k: summary[k] for k in ('poi_error_max_m', 'force_mean_n', 'force_setpoint_n',
@@ -116,7 +124,7 @@ def recorded_failure(summary, ctrl):
         **summary, 'tasks': summary['tasks'] if summary['tasks'] is not None else [touch],
         'failsafe_reason': ctrl[fired][1]['failsafe_reason'] if fired is not None else '',
         'failsafe_where': {'mode': before.get('mode'), 'phase': before.get('phase', '')},
-        'mode_history': recording.modes(ctrl)})
+        'mode_history': mode_samples(ctrl)})
 
 
 def task_summaries(rec, tool_tip_x_m):

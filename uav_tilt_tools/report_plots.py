@@ -8,7 +8,7 @@ import numpy as np
 from uav_tilt_common import names
 from uav_tilt_common.modes import Mode
 from uav_tilt_tools import recording, task_plots
-from uav_tilt_tools.mission_metrics import runs_of_mode
+from uav_tilt_tools.mission_metrics import mode_samples, runs_of_mode
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (after the headless backend is chosen)
@@ -19,7 +19,7 @@ WALL_HALF_LENGTH_M = 1.5
 def write_plots(rec, out_dir, tool_tip_x_m):
     """Write every plot the recording has data for; returns the paths written."""
     ctrl = recording.statuses(rec, names.CONTROLLER_STATUS)
-    hold = runs_of_mode(recording.modes(ctrl), Mode.HOLD)
+    hold = runs_of_mode(mode_samples(ctrl), Mode.HOLD)
     plots = (('trajectory.png', lambda: plot_trajectory(rec, tool_tip_x_m)),
              ('force.png', lambda: plot_force(rec, ctrl, hold)),
              ('actuators.png', lambda: plot_actuators(rec)),

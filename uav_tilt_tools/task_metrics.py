@@ -8,10 +8,13 @@ contact_lost, t_contact_s = [start, end] of HOLD or SLIDE, ...).
 
 - touch: over the hold, the tool tip's distance from the target's point of interest along
   the surface (``poi_error_m``, ``poi_error_max_m``), the push's mean and RMS error against
-  the task's force;
+  the task's force; a touch the controller completed that misses the inspection bar
+  (:func:`missed_bar`) is no success, its reason the bar's;
 - slide: over the slide, the push's RMS error, the tool tip's distance from the requested
   line in the wall's plane (``path_rms_error_m``, ``path_max_error_m``), the length of line
-  it covered (``length_m``) and the time it took (``duration_s``).
+  it covered, measured along the line as the mission measures it (``length_m``,
+  :class:`uav_tilt_control.plan.LineProgress`: a line that comes back on itself does not
+  fold), and the time it took (``duration_s``).
 
 The push is the contact force along the wall's outward normal (positive pushing).
 """
@@ -19,6 +22,7 @@ import numpy as np
 
 from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
+from uav_tilt_control.plan import LineProgress
 
 # The inspection bar (DESIGN section 7): over the hold, the true tool tip within 1 cm of the
 # point of interest along the surface, and the push within 0.1 N mean and 0.2 N RMS of the
@@ -50,6 +54,11 @@ def task_results(tasks, t_s, tip_map, force_map, targets=None, wall_normal_map=N
             entry.update(target=task.get('target', ''),
                          **_touch(task, t_s[mask], tip_map[mask], force_map[mask],
                                   (targets or {}).get(task.get('target', '')), wall_normal_map))
+            missed = entry['success'] and missed_bar(entry)
+            if missed:
+                # completed by the controller, yet off the bar by the truth (a push that
+                # fell short of its force, a press on a look-alike)
+                entry.update(success=False, reason=missed)
         else:
             normal = _normal(task, wall_normal_map)
             entry.update(_slide(task, t_s[mask], tip_map[mask], force_map[mask] @ normal,
@@ -81,7 +90,8 @@ def first_missed_bar(tasks):
 
 def failure_of(result):
     """Why a run missed the inspection bar, as {'reason', 'mode', 'phase'}, or None when it
-    met it: the failsafe that ended it and where it fired, else what kept it from
+    met it: the failsafe that ended it (the controller's last failsafe reason: a task's
+    failure writes one too) and where it fired, else what kept it from
     completing; for a run the controller completed, the first touch that the truth puts
     off the bar (:func:`missed_bar`, in HOLD)."""
     if result['success']:
@@ -103,14 +113,19 @@ def failure_of(result):
     return {'reason': reason, 'mode': where.get('mode'), 'phase': where.get('phase')}
 
 
+# A recording's stamps are whole nanoseconds, a task record's times the controller's own
+# floats: a sample within this of a bound is the sample at it (ticks are 3.3 ms apart).
+STAMP_TOLERANCE_S = 1e-6
+
+
 def pushing(task, t_s):
     """Samples of the task's HOLD or SLIDE: start <= t < end (the end of the data while it
-    had not ended)."""
+    had not ended), to STAMP_TOLERANCE_S."""
     window = task.get('t_contact_s')
     if not window or window[0] is None:
         return np.zeros(t_s.shape, dtype=bool)
     end = np.inf if window[1] is None else window[1]
-    return (t_s >= window[0]) & (t_s < end)
+    return (t_s >= window[0] - STAMP_TOLERANCE_S) & (t_s < end - STAMP_TOLERANCE_S)
 
 
 def _normal(task, wall_normal_map):
@@ -146,8 +161,9 @@ def _touch(task, t_s, tips, forces, truth, wall_normal_map):
 
 
 def slide_geometry(task, tips, normal):
-    """(distance from the line in the wall's plane, arc length of the nearest point of the
-    line, tips in wall coordinates (u, v)) of each tool tip (N, 3) for slide ``task``."""
+    """(distance from the line in the wall's plane, how far along the line the tips have
+    come (:class:`LineProgress`), tips in wall coordinates (u, v)) of each tool tip (N, 3)
+    of slide ``task``, in their order."""
     points = np.asarray(task['points_map'], dtype=float)
     flat = np.eye(3) - np.outer(normal, normal)
     # the line's own frame: x along the wall (horizontal), y up it, as the wall's (u, v)
@@ -155,18 +171,13 @@ def slide_geometry(task, tips, normal):
     uv0 = np.asarray(task.get('points_uv') or [[0.0, 0.0]], dtype=float)[0]
     tips = np.asarray(tips, dtype=float).reshape(-1, 3)
     distance = np.full(len(tips), np.inf)
-    along = np.zeros(len(tips))
-    covered = 0.0
     for a, b in zip(points[:-1], points[1:]):
         d = flat @ (b - a)
-        length = float(np.linalg.norm(d))
         rel = (tips - a) @ flat
-        u = np.clip(rel @ d / (length * length), 0.0, 1.0)
-        dist = np.linalg.norm(rel - np.outer(u, d), axis=1)
-        nearer = dist < distance
-        distance[nearer] = dist[nearer]
-        along[nearer] = covered + u[nearer] * length
-        covered += length
+        u = np.clip(rel @ d / (d @ d), 0.0, 1.0)
+        distance = np.minimum(distance, np.linalg.norm(rel - np.outer(u, d), axis=1))
+    progress = LineProgress(points @ flat)
+    along = np.array([progress.update(tip) for tip in tips @ flat])
     uv = uv0 + ((tips - origin) @ R)[:, :2]
     return distance, along, uv
 
