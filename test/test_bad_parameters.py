@@ -27,7 +27,7 @@ from ros_graph import REPO
      ["'summary_file'", 'No such file']),
     ('uav_tilt_tools.recorder_node', 'output:=/proc/run.mcap', ["'output'", '/proc/run.mcap']),
     ('uav_tilt_control.controller_node', 'contact_force:=0.5',
-     ["'contact_force'", '0.5', '(1.0, 15.0)']),
+     ["'contact_force'", '0.5', '(1, 9.6)']),
     # a misspelt name would leave its parameter at the default without a word
     ('uav_tilt_vision.vision_node', 'detect_evry:=3',
      ["unknown parameter 'detect_evry'", "'detect_every'"]),

@@ -7,12 +7,17 @@ and 320x240, the controller's target from vision. First in lockstep, then with
 simulated time measured once a second is simulated and vision has processed frames
 (start-up, discovery and the detector's loading excluded). Rates
 are per second of wall time; ``cpu_s_per_sim_s`` is each node's CPU time (user + system,
-all threads, from /proc/<pid>/stat) per simulated second.
+all threads, from /proc/<pid>/stat) per simulated second; the loop's period jitter is the
+median of the controller's p99 over the statuses of the window. The realtime run is made
+again with the camera drawn on the plant's tick (``camera_process`` off, the ``*_on_tick``
+keys), the reference the camera's own process is measured against, in the same run.
 """
 import os
 import signal
 import subprocess
 import time
+
+import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')
@@ -47,32 +52,40 @@ def node_pids(parent):
     return found
 
 
-def run_graph(mode, sim_s):
-    """One run in ``mode`` (lockstep | realtime): the statistics of the measured window."""
+def run_graph(mode, sim_s, extra=()):
+    """One run in ``mode`` (lockstep | realtime), ``extra`` launch.sh arguments: the
+    statistics of the measured window."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseWithCovarianceStamped
 
     from uav_tilt_common import names, ros_msgs, ros_qos
 
-    args = [LAUNCH, '--mission', 'inspect'] + (['--realtime'] if mode == 'realtime' else [])
+    args = ([LAUNCH, '--mission', 'inspect'] + (['--realtime'] if mode == 'realtime' else [])
+            + list(extra))
     launch = subprocess.Popen(args, cwd=REPO, stdout=subprocess.DEVNULL,
                               stderr=subprocess.DEVNULL)
     rclpy.init()
     node = rclpy.create_node('bench_graph', namespace='/uav')
     latest = {names.PLANT_STATUS: {}, names.CONTROLLER_STATUS: {}, names.VISION_STATUS: {}}
+    jitters = []        # the controller's p99 of each status in the window
+    procs = {}          # the nodes' pids, once the window starts
+
+    def on_status(msg, values):
+        values.update(ros_msgs.diagnostics_values(msg))
+        if procs and 'loop_jitter_ms_p99' in values:
+            jitters.append(float(values.pop('loop_jitter_ms_p99')))
+
     for topic, values in latest.items():
-        node.create_subscription(
-            DiagnosticArray, topic,
-            lambda msg, values=values: values.update(ros_msgs.diagnostics_values(msg)),
-            ros_qos.STATUS)
+        node.create_subscription(DiagnosticArray, topic,
+                                 lambda msg, values=values: on_status(msg, values),
+                                 ros_qos.STATUS)
     plant_status, controller, vision = (latest[t] for t in (
         names.PLANT_STATUS, names.CONTROLLER_STATUS, names.VISION_STATUS))
     # vision publishes one target/pose per processed frame
     poses = [0]
     node.create_subscription(PoseWithCovarianceStamped, names.TARGET_POSE,
                              lambda _: poses.__setitem__(0, poses[0] + 1), ros_qos.CONTROL)
-    procs = {}
 
     def snapshot():
         return dict(wall=time.monotonic(), sim=float(plant_status['sim_time_s']),
@@ -97,12 +110,12 @@ def run_graph(mode, sim_s):
         if set(procs) != set(NODES):
             raise RuntimeError(f'bench graph ({mode}): nodes {sorted(procs)} found')
         first = snapshot()
+        jitters.clear()
         spin_until(lambda: float(plant_status['sim_time_s']) >= first['sim'] + sim_s,
                    START_TIMEOUT_S + 20.0 * sim_s)
         last = snapshot()
         # vision's latency statistic covers its last frames, ending with the window
         latency = vision.get('latency_ms_p95')
-        jitter = controller.get('loop_jitter_ms_p99')
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
@@ -116,7 +129,7 @@ def run_graph(mode, sim_s):
     return dict(rtf=sim / wall, controller_rate_hz=(last['ticks'] - first['ticks']) / wall,
                 vision_fps=(last['frames'] - first['frames']) / wall,
                 vision_latency_ms_p95=None if latency is None else float(latency),
-                jitter_ms_p99=None if jitter is None else float(jitter),
+                jitter_ms_p99=float(np.median(jitters)) if jitters else None,
                 late_commands=last['late'] - first['late'],
                 cpu_s_per_sim_s={name: (last['cpu'][name] - first['cpu'][name]) / sim
                                  for name in first['cpu']})
@@ -126,6 +139,7 @@ def bench_graph(sim_s=20.0):
     """The lockstep keys, then the realtime ones (``realtime_*``)."""
     lockstep = run_graph('lockstep', sim_s)
     realtime = run_graph('realtime', sim_s)
+    on_tick = run_graph('realtime', sim_s, ('--param', 'plant.camera_process:=false'))
     result = {key: lockstep[key] for key in ('rtf', 'controller_rate_hz', 'vision_fps',
                                              'vision_latency_ms_p95', 'cpu_s_per_sim_s')}
     result.update(realtime_rtf=realtime['rtf'],
@@ -134,5 +148,7 @@ def bench_graph(sim_s=20.0):
                   realtime_late_commands=realtime['late_commands'],
                   realtime_vision_fps=realtime['vision_fps'],
                   realtime_cpu_s_per_sim_s=realtime['cpu_s_per_sim_s'],
+                  realtime_jitter_ms_p99_on_tick=on_tick['jitter_ms_p99'],
+                  realtime_late_commands_on_tick=on_tick['late_commands'],
                   sim_seconds=sim_s)
     return result
