@@ -1110,10 +1110,33 @@ class Mission:
         cfg = self.config
         self._landing.reset()
         rate = cfg.descent_rate_m_s if self._mode == Mode.LAND else cfg.failsafe_descent_rate_m_s
-        p0 = self._ref_map()[0]
-        self._plan(np.array([p0[0], p0[1], cfg.ground_z_m]), rate)
+        self._plan(self._landing_point(self._ref_map()[0]), rate)
         self._yaw_goal = self._yaw_ref
         self._pitch_goal = 0.0
+
+    def _landing_point(self, p_map):
+        """Where the descent from ``p_map`` ends: on the ground below it or, below the last
+        surface worked on when that leans away from the vehicle (its foot comes nearer as
+        the vehicle descends), out from it as far as keeps the tool tip ``standoff_m`` from
+        its plane down to the ground. The straight line there keeps at least that much all
+        the way: it starts at the standoff."""
+        cfg = self.config
+        goal = np.array([p_map[0], p_map[1], cfg.ground_z_m])
+        if self._target_frame is None:
+            return goal
+        n_map = self._target_frame.R_map_t[:, 2]       # the surface's outward normal
+        n_h2 = float(n_map[:2] @ n_map[:2])
+        if n_h2 < 1e-6:
+            return goal                                 # a floor or a ceiling
+        tool_map = self.vehicle.tool_tip_x_m * np.array(
+            [math.cos(self._yaw_ref), math.sin(self._yaw_ref), 0.0])
+        origin = self._target_frame.origin_map
+        if float((p_map + tool_map - origin) @ n_map) <= 0.0:
+            return goal                                 # not in front of that surface
+        short_m = cfg.standoff_m - float((goal + tool_map - origin) @ n_map)
+        if short_m > 0.0:
+            goal[:2] += short_m * n_map[:2] / n_h2      # out along the normal's level part
+        return goal
 
     def _tick_land(self, target, f_n, stale):
         cfg = self.config
