@@ -7,8 +7,9 @@ and 320x240, the controller's target from vision. First in lockstep, then with
 simulated time measured once a second is simulated and vision has processed frames
 (start-up, discovery and the detector's loading excluded). Rates
 are per second of wall time; ``cpu_s_per_sim_s`` is each node's CPU time (user + system,
-all threads, from /proc/<pid>/stat) per simulated second; the loop's period jitter is the
-median of the controller's p99 over the statuses of the window. The realtime run is made
+all threads, from /proc/<pid>/stat, the processes it started included) per simulated
+second; the loop's period jitter is the median of the controller's p99 over the statuses
+of the window. The realtime run is made
 again with the camera drawn on the plant's tick (``camera_process`` off, the ``*_on_tick``
 keys), the reference the camera's own process is measured against, in the same run.
 """
@@ -35,8 +36,8 @@ def cpu_s(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def node_pids(parent):
-    """{node: pid} of the graph's nodes among the children of ``parent``."""
+def children(parent):
+    """{pid: command line} of the processes whose parent is ``parent``."""
     found = {}
     for entry in os.listdir('/proc'):
         try:
@@ -45,11 +46,21 @@ def node_pids(parent):
             if ppid != parent:
                 continue
             with open(f'/proc/{entry}/cmdline', 'rb') as stream:
-                cmdline = stream.read().decode(errors='replace')
+                found[int(entry)] = stream.read().decode(errors='replace')
         except (OSError, ValueError, IndexError):
             continue        # not a process, or gone already
-        found.update({name: int(entry) for name, key in NODES.items() if key in cmdline})
     return found
+
+
+def node_pids(parent):
+    """{node: pid} of the graph's nodes among the children of ``parent``."""
+    return {name: pid for pid, cmdline in children(parent).items()
+            for name, key in NODES.items() if key in cmdline}
+
+
+def node_cpu_s(pid):
+    """CPU seconds of a node and of the processes it started (the plant's camera)."""
+    return cpu_s(pid) + sum(cpu_s(child) for child in children(pid))
 
 
 def run_graph(mode, sim_s, extra=()):
@@ -92,7 +103,7 @@ def run_graph(mode, sim_s, extra=()):
                     ticks=int(controller.get('ticks', 0)),
                     frames=poses[0],
                     late=int(plant_status.get('late_commands', 0)),
-                    cpu={name: cpu_s(pid) for name, pid in procs.items()})
+                    cpu={name: node_cpu_s(pid) for name, pid in procs.items()})
 
     def spin_until(predicate, timeout_s):
         deadline = time.monotonic() + timeout_s
