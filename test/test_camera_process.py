@@ -84,9 +84,11 @@ def _alive(pid):
 def test_the_camera_process_ends_with_its_parent(how):
     """A parent killed outright, or a terminal's Ctrl-C to the group: the camera process
     ends too (its pipe closes), without a traceback of its own."""
+    # SIGINT as a terminal delivers it: a shell's background jobs (CI) start with it ignored
     parent = subprocess.Popen([sys.executable, '-c', CHILD], stdin=subprocess.PIPE,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              start_new_session=True)
+                              start_new_session=True,
+                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         pid = int(parent.stdout.readline())
         assert _alive(pid)
