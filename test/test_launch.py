@@ -222,6 +222,10 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
     assert summary['force_rms_error_n'] <= 0.2
     assert summary['poi_error_m'] < 0.01 and summary['contact_lost'] == 0
     assert summary['failure'] is None      # the inspection bar, by the recorded truth
+    # in lockstep the controller answers each of the 300 Hz ticks: its rate on the wall
+    # clock is the plant's real-time factor times 300, give or take the ticks lost
+    assert summary['controller_rate_hz'] == pytest.approx(300 * summary['rtf'],
+                                                          rel=LOST_SHARE + 0.05)
     print(f'recorded {duration_s:.2f} s of sim time ({len(set(clock))} of {ticks} ticks), '
           f'camera {counts} of {frames_published}; summary {summary}')
 

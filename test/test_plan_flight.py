@@ -100,5 +100,5 @@ def test_the_recorded_plan_flight_reports_what_the_flight_did(flights, bag_dir):
     # touches' POI error and the first touch's keys at the top, as in the flight's summary
     assert reported['poi_error_max_m'] == pytest.approx(flown['poi_error_max_m'], abs=1e-3)
     # sim over wall time, ticks over wall time: of the flight, not of the file's closing
-    assert reported['rtf'] == pytest.approx(flown['rtf'], rel=0.2)
-    assert reported['controller_rate_hz'] == pytest.approx(flown['controller_rate_hz'], rel=0.2)
+    assert reported['rtf'] == pytest.approx(flown['rtf'], rel=0.05)
+    assert reported['controller_rate_hz'] == pytest.approx(flown['controller_rate_hz'], rel=0.05)

@@ -39,23 +39,31 @@ def stamp(t):
     return ros_msgs.to_stamp(t)
 
 
+RTF = 0.5
+
+
 def wall_ns(t):
     """Log time: the run goes at half real time, starting at 1000 s."""
-    return int(1e12 + t * 2e9)
+    return int(1e12 + t / RTF * 1e9)
 
 
-def controller_status(contact_force_n, loop_rate_hz=298.5):
+def controller_status(contact_force_n):
     """What controller_node publishes: a tick's status from the real ControllerCore with the
-    node's loop statistics (the mission keys are set per sample by the caller)."""
+    node's loop statistics, a tick each 1/300 s of sim time at RTF (the mission keys, and
+    the ticks and wall time, are set per sample by :func:`status`)."""
     core = ControllerCore(VehicleParams(), ControllerConfig(contact_force=contact_force_n))
     core.on_odometry(VehicleState(0.0, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]),
                                   np.zeros(3), np.zeros(3)))
     _, values = core.tick(0.0, np.zeros(3), 1.0 / 300)
-    values.update(_loop_stats([1.0 / loop_rate_hz] * 10, [1e-4] * 10, 1.0 / loop_rate_hz))
+    period_s = 1.0 / (300 * RTF)
+    values.update(_loop_stats([period_s] * 10, [1e-4] * 10, 1.0 / 300))
     return values
 
 
 def status(t, base, **values):
+    """controller/status at sim time ``t``: its ticks so far and its wall time (the node
+    started 3 s before the plant's first tick)."""
+    values = dict(dict(ticks=round(300 * t), wall_time_s=3.0 + t / RTF), **values)
     return ros_msgs.diagnostics_msg('controller', dict(base, **values), stamp(t))
 
 
@@ -93,7 +101,7 @@ def synthetic_recording(push_n, contact_force_n=6.0, tip_offset=TIP_OFFSET, cont
         (wall_ns(tc), status(tc, base, mode=mode.value, success=tc >= 1.9,
                              contact_lost=contact_lost))
         for tc, mode in modes]
-    rec[names.PLANT_STATUS] = plant_statuses(2.0, 0.5)
+    rec[names.PLANT_STATUS] = plant_statuses(2.0, RTF)
     return rec, t
 
 
@@ -115,8 +123,8 @@ def test_force_and_poi_metrics_are_exact_over_hold():
     assert summary['success'] is True
     assert summary['contact_lost'] == 1
     assert summary['mission_time_s'] == pytest.approx(1.8, abs=1e-9)
-    assert summary['rtf'] == pytest.approx(0.5, abs=1e-9)
-    assert summary['controller_rate_hz'] == pytest.approx(298.5)
+    assert summary['rtf'] == pytest.approx(RTF, abs=1e-9)
+    assert summary['controller_rate_hz'] == pytest.approx(300 * RTF)
     assert set(summary) == set(report.SUMMARY_KEYS)
     # completed, but 5 cm from the point of interest by the truth
     assert summary['failure'] == {'reason': 'off_target', 'mode': 'HOLD', 'phase': ''}
@@ -157,6 +165,28 @@ def test_failure_judges_the_recorded_run_on_the_truth_as_the_campaign_does():
                                        (1.9, Mode.IDLE)], reasons)]
     assert report.summarize(rec, TOOL_X)['failure'] == {
         'reason': 'unreachable', 'mode': 'RETREAT', 'phase': ''}
+
+
+def test_the_controller_rate_is_its_ticks_over_its_wall_time():
+    """As fly counts it: a loop that slowed for a while counts with the ticks it missed (a
+    median of the statuses' windows would give the unloaded rate), and the statuses sent
+    before the first tick (waiting for sensors) do not count."""
+    rng = np.random.default_rng()
+    rate_hz, slow_hz = rng.uniform(250.0, 300.0), rng.uniform(50.0, 150.0)
+    # 10 Hz statuses over 12 s of wall time: 2 s waiting, then 6 s at rate_hz, 4 s at slow_hz
+    walls_s = 0.1 * np.arange(121)
+    hz = np.where(walls_s <= 2.0, 0.0, np.where(walls_s <= 8.0, rate_hz, slow_hz))
+    ticks = np.floor(np.cumsum(hz * 0.1)).astype(int)
+    rec, _ = synthetic_recording(np.full(N, 5.0))
+    base = controller_status(5.0)
+    rec[names.CONTROLLER_STATUS] = [
+        (wall_ns(w), status(w, base, mode=Mode.HOVER.value, ticks=int(n), wall_time_s=w))
+        for w, n in zip(walls_s, ticks)]
+    first = np.argmax(ticks > 0)
+    assert walls_s[first] == pytest.approx(2.1)
+    rate = report.summarize(rec, TOOL_X)['controller_rate_hz']
+    assert rate == pytest.approx((ticks[-1] - ticks[first]) / (12.0 - 2.1), rel=1e-9)
+    assert rate == pytest.approx((5.9 * rate_hz + 4.0 * slow_hz) / 9.9, abs=0.2)
 
 
 @pytest.mark.parametrize('asked_n', [4.0, 7.5])

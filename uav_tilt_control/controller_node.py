@@ -304,10 +304,10 @@ class ControllerNode(Node):
             self.plan_version = self.core.mission.plan_version
             self.pub_plan.publish(String(data=json.dumps(self.core.plan_report())))
         values = dict(self.status) or dict(mode=modes.WAITING_FOR_SENSORS)
+        now = time.monotonic()
         values.update(ticks=self.ticks, saturated_ticks=self.saturated_ticks,
                       target_source=self.cfg.target_source,
-                      rejected_inputs=self.rejects.total)
-        now = time.monotonic()
+                      rejected_inputs=self.rejects.total, wall_time_s=now - self.wall_t0)
         if now - self.loop_stats[0] >= STATS_PERIOD_S:
             self.loop_stats = (now, _loop_stats(self.periods_s, self.compute_s,
                                                 self.nominal_dt_s))

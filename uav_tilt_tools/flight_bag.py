@@ -149,7 +149,8 @@ class FlightBag:
         values = dict(status) or dict(mode=WAITING_FOR_SENSORS)
         values.update(ticks=flight.plant.tick, saturated_ticks=self._saturated_ticks,
                       target_source=self.config.target_source, rejected_inputs=0,
-                      contact_force=self.config.contact_force)
+                      contact_force=self.config.contact_force,
+                      wall_time_s=(now - self._wall_t0_ns) * 1e-9)
         if final:
             wall_ns, tick = self._wall_t0_ns, 0
         if now > wall_ns and flight.plant.tick > tick:

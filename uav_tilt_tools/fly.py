@@ -68,10 +68,10 @@ def fly(scenario, target_source='vision', overrides=None, duration_s=None, model
     try:
         result = run_mission(scenario, config, duration_s=duration_s,
                              plant_config=plant_config, vision=vision, recorder=bag)
+        wall_s = time.perf_counter() - start    # of the flight, not of the file's closing
     finally:
         if bag is not None:
             bag.close()
-    wall_s = time.perf_counter() - start
     # the keys of a node graph's summary.json, on this process's wall clock
     result.update(rtf=result['sim_time_s'] / wall_s,
                   controller_rate_hz=result['ticks'] / wall_s, vision_fps=None,

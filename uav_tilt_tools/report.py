@@ -7,13 +7,15 @@ has, measured on the wall clock:
 
 - ``rtf``: sim time over wall time of the plant (plant/status ``sim_time_s`` and
   ``wall_time_s``, first to last status recorded).
-- ``controller_rate_hz``: the control loop's rate, controller/status ``loop_rate_hz``.
+- ``controller_rate_hz``: control ticks over wall time of the controller (controller/status
+  ``ticks`` and ``wall_time_s``, from its first status with a tick to its last), as `uav-tilt
+  fly` counts its ticks over the flight's wall time.
 - ``vision_fps``, ``vision_latency_ms_p95``: frames processed per second and the 95th
   percentile of image arrival -> pose publication in vision (vision/status ``fps``,
-  ``latency_ms_p95``).
+  ``latency_ms_p95``), each the median over the statuses recorded (a node's last status
+  may cover a part window only, one sent as the graph stops).
 
-Each is the median over the statuses recorded (a node's last status may cover a part
-window only, one sent as the graph stops); null when that status is not recorded.
+Each is null when the statuses it needs are not recorded.
 """
 import json
 import os
@@ -73,6 +75,18 @@ def real_time_factor(plant_statuses):
     return (spans[-1][0] - spans[0][0]) / (spans[-1][1] - spans[0][1])
 
 
+def tick_rate_hz(controller_statuses):
+    """Control ticks over wall time from the first controller/status that counted a tick
+    to the last, or None. A loop that slowed for a while counts with the ticks it missed,
+    which a median of the statuses' windows would not."""
+    spans = [(json_number(v.get('ticks')), json_number(v.get('wall_time_s')))
+             for _, v in controller_statuses]
+    spans = [(n, w) for n, w in spans if n is not None and n > 0 and w is not None]
+    if len(spans) < 2 or spans[-1][1] <= spans[0][1]:
+        return None
+    return (spans[-1][0] - spans[0][0]) / (spans[-1][1] - spans[0][1])
+
+
 def median_of(statuses, key):
     """The median of ``key`` over the (time, values) statuses that give it a number, or
     None."""
@@ -94,7 +108,7 @@ def summarize(rec, tool_tip_x_m):
                               else (None, None))
     summary.update(
         rtf=real_time_factor(recording.statuses(rec, names.PLANT_STATUS)),
-        controller_rate_hz=median_of(ctrl, 'loop_rate_hz'),
+        controller_rate_hz=tick_rate_hz(ctrl),
         vision_fps=median_of(vision, 'fps'),
         vision_latency_ms_p95=median_of(vision, 'latency_ms_p95'))
     with_tasks(summary, task_summaries(rec, tool_tip_x_m))
