@@ -1,5 +1,6 @@
 """FlightCore closed loop on an in-test 6-DoF rigid body (a stand-in for the PyBullet plant)."""
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -185,21 +186,29 @@ def test_non_finite_inputs_give_a_safe_command():
         assert np.all(np.isfinite(command.as_array()))
 
 
-def test_leaving_the_ground_hands_the_learnt_weight_to_the_observer():
+@pytest.mark.parametrize('lowest_n, highest_n', [(0.0, 3.0), (5.0, 15.0)])
+def test_leaving_the_ground_hands_the_learnt_weight_to_the_observer(lowest_n, highest_n):
     # what the hover-thrust estimator learnt on the climb starts the observer's vertical
-    # estimate: the thrust does not step, and the error is not counted twice
+    # estimate: the thrust does not step, and the error is not counted twice. A weight error
+    # beyond the observer's bound (4 N; a vehicle up to twice, or half, the model's mass:
+    # up to 15.7 N) leaves it the rest.
     body = RigidBody((0.0, 0.0, 1.0))
     core = FlightCore(VEHICLE)
     climbing = ImpedanceSetpoint(lambda_d_t=body.p.copy(), airborne=False)
     specific = np.array([0.0, 0.0, GRAVITY])
     core.step(body.state(), climbing, np.zeros(3), CONTROL_DT_S, specific)
-    learnt_n = float(np.random.default_rng().uniform(-3.0, 3.0))
+    rng = np.random.default_rng()
+    learnt_n = float(rng.choice([-1.0, 1.0]) * rng.uniform(lowest_n, highest_n))
     core.impedance.f_hover_n = learnt_n
     before = core.step(body.state(), climbing, np.zeros(3), CONTROL_DT_S, specific)[0]
     airborne = dataclasses.replace(climbing, airborne=True)
     after = core.step(body.state(), airborne, np.zeros(3), CONTROL_DT_S, specific)[0]
-    assert core.impedance.f_hover_n == 0.0
+    limit_n = core.disturbance.config.limit_n
+    handed_n = math.copysign(min(abs(learnt_n), limit_n), learnt_n)
+    assert core.impedance.f_hover_n == pytest.approx(learnt_n - handed_n, abs=1e-9)
     # one tick of the observer's filter (0.15 s) moves it by 2% of what it now sees
-    assert core.disturbance.f_ext_map[2] == pytest.approx(-learnt_n, abs=0.03 * abs(learnt_n))
+    assert core.disturbance.f_ext_map[2] == pytest.approx(-handed_n, abs=0.03 * abs(handed_n))
+    assert after.thrusts_n.sum() == pytest.approx(before.thrusts_n.sum(),
+                                                  abs=0.03 * abs(handed_n))
     assert after.thrusts_n.sum() == pytest.approx(before.thrusts_n.sum(),
                                                   abs=0.03 * abs(learnt_n))

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from uav_tilt_common.config import ConfigError
 from uav_tilt_common.state import VehicleState
-from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_common.vehicle import GRAVITY, VehicleParams
 from uav_tilt_common.modes import Mode
 from uav_tilt_control.mission import MinJerk, Mission, MissionConfig
 from uav_tilt_control.target_estimator import TargetEstimate
@@ -22,6 +22,7 @@ P_POI = np.array([3.0, 0.5, 1.5])
 NORMAL = np.array([-1.0, 0.0, 0.0])
 GEAR_Z_M = 0.1          # body origin height when standing on the ground
 VEHICLE = VehicleParams()
+WEIGHT_N = VEHICLE.mass_kg * GRAVITY
 PERFECT = TargetEstimate(P_POI, NORMAL, 0.02, True)
 
 
@@ -30,7 +31,9 @@ class Flight:
 
     ``target``: what vision reports each tick (:meth:`seen`); ``wall``: (a point on it, its
     normal, how far from that point it reaches), by default the target's, within 1 m;
-    ``plan``: the mission's plan.
+    ``plan``: the mission's plan; :attr:`thrust_up_n`: the vertical thrust the flight core
+    asks for, the model's weight (a vehicle as heavy as its model, in the air) unless a test
+    sets it.
     """
 
     def __init__(self, config=None, target=PERFECT, plan=None, wall=None):
@@ -43,6 +46,7 @@ class Flight:
         self.v = np.zeros(3)
         self.q = np.array([0.0, 0.0, 0.0, 1.0])
         self.force_n = 0.0
+        self.thrust_up_n = WEIGHT_N
         self.modes = [Mode.IDLE]
         self.log = []
         self.phases = []        # the mission's phase at each logged tick
@@ -62,7 +66,8 @@ class Flight:
         reading; ``f_map`` gives its whole force on the vehicle (map)."""
         target = self.seen() if target == 'default' else target
         f = self.force_n if force_n is None else force_n
-        sp = self.mission.update(self.t_s, self.state(), target, f, odom_age_s, f_map)
+        sp = self.mission.update(self.t_s, self.state(), target, f, odom_age_s, f_map,
+                                 self.thrust_up_n)
         self.log.append((self.t_s, self.mission.mode, sp, self.p.copy()))
         self.phases.append(self.mission.phase)
         self.forces.append(self.force_n)
@@ -607,12 +612,22 @@ def _setpoint_z(flight):
     return (sp.origin_map + sp.R_map_t @ sp.lambda_d_t)[2]
 
 
+def _resting_thrust_n(cfg):
+    """What the flight core asks of a vehicle stopped on a roof below its setpoint, once it
+    has pulled down long enough: less than any vehicle in the air would need (a fresh
+    share of land_detect_thrust_ratio of the weight)."""
+    return float(np.random.default_rng().uniform(0.0, 0.99)) * (
+        cfg.land_detect_thrust_ratio * WEIGHT_N)
+
+
 def test_a_landing_stopped_above_ground_z_lands_where_it_stopped():
     flight, roof_m = _landing_on_a_roof()
     cfg = flight.config
-    # stopped once its setpoint passes land_detect_height_m below it, landed land_detect_s on
+    # stopped once its setpoint passes land_detect_height_m below it and pulling down,
+    # landed land_detect_s on
     flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land_detect_height_m, 30.0,
                      target=None)
+    flight.thrust_up_n = _resting_thrust_n(cfg)
     t_held = flight.t_s
     flight.run_to(Mode.IDLE, timeout_s=cfg.land_detect_s + 0.1, target=None)
     assert flight.t_s - t_held == pytest.approx(cfg.land_detect_s, abs=2 * DT_S)
@@ -628,10 +643,34 @@ def test_a_landing_held_by_its_tool_is_not_landed():
     hanging = dict(target=None, f_map=np.array([0.0, 0.0, 2.0 * cfg.free_flight_contact_n]))
     flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land_detect_height_m, 30.0,
                      **hanging)
+    flight.thrust_up_n = _resting_thrust_n(cfg)
     flight.run_for(2.0 * cfg.land_detect_s, **hanging)
     assert flight.mission.mode == Mode.LAND
     # off the ledge onto its gear: landed
     flight.run_to(Mode.IDLE, timeout_s=cfg.land_detect_s + 0.1, target=None)
+
+
+def test_a_vehicle_hovering_above_its_descent_is_not_landed():
+    """A vehicle lighter than the controller's model (the scenarios go down to half of it)
+    hovers above its descending setpoint until the hover-thrust estimate has learnt its
+    weight: still, above the setpoint, but making its own weight, it is in the air. Only
+    once the thrust asked for falls below land_detect_thrust_ratio of the weight does it
+    stand on something."""
+    flight, roof_m = _landing_on_a_roof()
+    cfg = flight.config
+    rng = np.random.default_rng()
+    flight.thrust_up_n = float(rng.uniform(0.5, 1.0)) * WEIGHT_N
+    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land_detect_height_m, 30.0,
+                     target=None)
+    flight.run_for(4.0 * cfg.land_detect_s, target=None)
+    assert flight.mission.mode == Mode.LAND
+    flight.thrust_up_n = None         # unknown thrust: no such landing either
+    flight.run_for(2.0 * cfg.land_detect_s, target=None)
+    assert flight.mission.mode == Mode.LAND
+    flight.thrust_up_n = _resting_thrust_n(cfg)
+    flight.run_to(Mode.IDLE, timeout_s=cfg.land_detect_s + 0.1, target=None)
+    assert flight.mission.events[-1]['reason'] == (
+        f'landed {GEAR_Z_M + roof_m:.2f} m above ground_z_m')
 
 
 def _tilted(flight, tilt_rad):

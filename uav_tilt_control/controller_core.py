@@ -105,6 +105,7 @@ class ControllerCore:
         self._ground_truths: dict[str, tuple] = {}
         self._truth_id = ''         # the target of the task under way
         self._f_contact_map = np.zeros(3)
+        self._thrust_up_n = None       # the vertical thrust asked for on the tick before
         self._autostarted = False
         self.autostart_held = False     # set by the node until a recorder listens
         # an autostart with the target from vision waits for vision's first frame: the
@@ -234,7 +235,7 @@ class ControllerCore:
                 and not self.autostart_held):
             self._autostarted = self.mission.inspect()[0]
         setpoint = self.mission.update(t_s, self._odom, target, self.f_normal_n, odom_age_s,
-                                       self._f_contact_map)
+                                       self._f_contact_map, self._thrust_up_n)
         if self.mission.mode == Mode.IDLE:
             self._was_idle = True
             return self._idle_command(), self._status(t_s, odom_age_s, {}, target)
@@ -252,6 +253,8 @@ class ControllerCore:
                                  self._odom.v_map, gyro)
         command, diagnostics = self.flight.step(state, setpoint, self._f_contact_map, dt_s,
                                                 None if stale else accel)
+        f_p_map = diagnostics.get('f_p_map')
+        self._thrust_up_n = None if f_p_map is None else float(f_p_map[2])
         return self._bounded(command), self._status(t_s, odom_age_s, diagnostics, target)
 
     # ---- helpers ----

@@ -61,6 +61,15 @@ class DisturbanceObserver:
         """The thrust force (map) just sent to the actuators."""
         self._f_cmd_map = np.asarray(f_thrust_map, dtype=float)
 
+    def take_vertical(self, f_n):
+        """Add ``f_n`` to the vertical estimate as far as ``limit_n`` leaves room beside the
+        horizontal one; returns the part it could not take [N]."""
+        f = self.f_ext_map
+        room = math.sqrt(max(0.0, self.config.limit_n ** 2 - f[0] ** 2 - f[1] ** 2))
+        wanted = f[2] + f_n
+        f[2] = min(max(wanted, -room), room)
+        return wanted - f[2]
+
     def update(self, R_map_base, specific_force_base, f_contact_map, dt_s, airborne=True):
         """One tick: the IMU's specific force (body) and the measured contact force (map),
         both over the tick since the last command. Returns the filtered F_ext (map).

@@ -61,9 +61,11 @@ class ImpedanceConfig:
     contact_feedforward: bool = param(False)
     accel_limit_mps2: float = param(6.0, lo=0.1, hi=50.0)
     # Hover-thrust estimation (as PX4 does): a slow integrator on the vertical error learns
-    # the real weight, so a mass mismatch leaves no altitude offset. 0 disables it.
+    # the real weight, so a mass mismatch leaves no altitude offset. 0 disables it. Its
+    # bound, a fraction of the nominal weight, spans the vehicles a scenario may be (half to
+    # twice the nominal mass): at 0.3 a vehicle of 0.6 hovered 0.3 m above its setpoint.
     hover_estimator_tau_s: float = param(2.0, lo=0.0, hi=100.0)
-    hover_estimator_limit: float = param(0.3, lo=0.0, hi=1.0)   # fraction of nominal weight
+    hover_estimator_limit: float = param(1.0, lo=0.0, hi=1.0)
     # Learn only when the vertical error is quasi-static: a moving error is a manoeuvre,
     # not a weight error (the integrator would wind up and overshoot).
     hover_estimator_speed_m_s: float = param(0.05, lo=0.0, hi=10.0)

@@ -24,6 +24,7 @@ import numpy as np
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.geometry import matrix_to_euler_zyx
 from uav_tilt_common.modes import Mode
+from uav_tilt_common.vehicle import GRAVITY
 from uav_tilt_control import frames
 from uav_tilt_control.impedance import ImpedanceConfig, contact_depth_for_force
 from uav_tilt_control.lowpass import lowpass_weight
@@ -169,6 +170,10 @@ class MissionConfig:
     fence_height_m: float = param(30.0, lo=1.0, hi=1e3)
     land_detect_speed_m_s: float = param(0.1, lo=0.01, hi=1.0)
     land_detect_s: float = param(0.5, lo=0.0, hi=10.0)
+    # Landed above ground_z_m (a roof) only while the vertical thrust asked for is below this
+    # fraction of the nominal weight (as PX4's LNDMC_LOW_T_THR): a vehicle that keeps still
+    # in the air makes its own weight, at least half the nominal one (the scenarios' range).
+    land_detect_thrust_ratio: float = param(0.3, lo=0.0, hi=1.0)
     # Arrival and landing ask whether the vehicle is still, which is its mean speed over a
     # while, not one odometry sample: they read the velocity low-passed over this (noise of
     # 0.05 m/s per axis puts a third of the samples over 0.1 m/s).
@@ -325,6 +330,7 @@ class Mission:
         self._t_mode_s = 0.0
         self._state = None
         self._odom_age_s = np.inf
+        self._thrust_up_n = None
         self._R_map_t = np.eye(3)
         self._origin_map = np.zeros(3)
         self._target_frame = None       # TargetFrame of the last estimate used
@@ -549,16 +555,21 @@ class Mission:
         if self._mode == Mode.SEARCH:
             self._search.walls.observe(point_map, normal_map, share)
 
-    def update(self, now_s, state, target, f_contact_n, odom_age_s, f_contact_map=None):
+    def update(self, now_s, state, target, f_contact_n, odom_age_s, f_contact_map=None,
+               thrust_up_n=None):
         """One control tick: returns the ImpedanceSetpoint for the impedance law.
 
         ``target``: TargetEstimate(p_poi_map, normal_map, age_s, valid) or None;
         ``f_contact_n``: force along the normal from the F/T sensor, positive pushing;
         ``odom_age_s``: age of the odometry in ``state``; ``f_contact_map``: the F/T's
-        whole force on the vehicle in map (N), which SEARCH backs away along.
+        whole force on the vehicle in map (N), which SEARCH backs away along;
+        ``thrust_up_n``: the vertical thrust (map z, N) the flight core asked for on the
+        tick before, which tells a landing on something higher from a hover (None: unknown,
+        so no such landing is declared).
         """
         cfg = self.config
         self._now_s = float(now_s)
+        self._thrust_up_n = thrust_up_n
         self._odom_age_s = float(odom_age_s)
         stale = not (odom_age_s <= cfg.odom_stale_s and _finite_state(state))
         dt_s = self._tick_dt_s()
@@ -1071,14 +1082,16 @@ class Mission:
         tolerance_m = self.config.slide_path_tolerance_m
         progress = self._slide_progress
         progress.update(tip_t)
+        # how far the tool tip is behind its reference along the line (at the line's end
+        # time, short of the end): friction, or something on the line, holds it, and the
+        # vehicle pitches against it while the reference slides on
+        behind_m = self._traj.progress(self._now_s) * self._traj.length - progress.along_m
         if _distance_to_polyline(tip_t, self._slide_line_t) > tolerance_m:
             self._fail_task('off_line')
+        elif behind_m > tolerance_m:
+            self._fail_task('short_of_line')
         elif self._traj.done(self._now_s):
-            if progress.length_m - progress.along_m > tolerance_m:
-                # the line's time is up and the tool tip did not follow it (held by friction)
-                self._fail_task('short_of_line')
-            else:
-                self._end_push('line complete')
+            self._end_push('line complete')
 
     def _enter_target_lost(self, previous, target):
         self._resume_mode = previous
@@ -1148,10 +1161,14 @@ class Mission:
         z_m = self._state.p_map[2]
         low = z_m < cfg.ground_z_m + cfg.land_detect_height_m
         # Or stopped on something higher (a roof, a box; ground_z_m set too low, odometry
-        # drifting up): that far above its descending setpoint, no free flight keeps still
-        # (the spring alone pulls at K_z h / M, about 1.9 m/s^2 at 0.3 m). Resting on its
-        # gear, not hanging by its tool, which would fall once the rotors stop.
-        held = (z_m > self._ref_map()[0][2] + cfg.land_detect_height_m
+        # drifting up): that far above its descending setpoint, asking for less thrust than
+        # any vehicle it may be weighs, and still. Being above the setpoint alone says
+        # nothing: a vehicle lighter than the controller's model hovers there until the
+        # hover-thrust estimate has learnt its weight. Resting on its gear, not hanging by
+        # its tool, which would fall once the rotors stop.
+        thrust_low = self._thrust_up_n is not None and self._thrust_up_n < (
+            cfg.land_detect_thrust_ratio * self.vehicle.mass_kg * GRAVITY)
+        held = (z_m > self._ref_map()[0][2] + cfg.land_detect_height_m and thrust_low
                 and self._bump() is None)
         slow = np.linalg.norm(self._v_map) < cfg.land_detect_speed_m_s
         if self._landing.update((low or held) and slow, self._now_s, cfg.land_detect_s):
