@@ -490,12 +490,16 @@ def test_a_leaning_wall_is_cleared_on_take_off_and_landing(lean):
         result = mission_result(flight)
         landed_ft_n = np.linalg.norm(flight.log[-1]['ft_force_ee_n'])
         landing_push_n = max(e['push_n'] for e in flight.log if e['mode'] == 'LAND')
+        takeoff_push_n = max(e['push_n'] for e in flight.log if e['mode'] == 'TAKEOFF')
     finally:
         flight.close()
     what = f'{scenario.wall}, start yaw {scenario.start_yaw_deg:.1f}: {result}'
     cleared = {e['mode'] for e in events if e['phase'] == 'clear'}
     if lean == 'over':
         assert 'TAKEOFF' in cleared, what
+        # the take-off's bump (6-11 N) is no touch: the touch's own impact is reported
+        assert result['first_touch_peak_n'] <= 1.5 * config.contact_force, what
+        assert result['first_touch_peak_n'] < takeoff_push_n, (takeoff_push_n, what)
     else:
         assert 'LAND' not in cleared and landing_push_n == 0.0, (landing_push_n, what)
     assert [m for _, m in result['mode_history']] == [

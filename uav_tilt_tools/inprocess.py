@@ -153,9 +153,12 @@ def mission_result(flight):
 
 
 def _first_touch_peak(log, push, window_s=0.25):
-    """Largest true push within ``window_s`` of the first contact: the impact's transient
-    (a rebound lasts tens of ms, the rotors answer in 25 ms), or None without a contact."""
-    touched = np.nonzero(push > 0.0)[0]
+    """Largest true push within ``window_s`` of the mission's first touch, its first contact
+    in CONTACT: the impact's transient (a rebound lasts tens of ms, the rotors answer in
+    25 ms), or None without one. A wall met on the way (a take-off under a wall leaning over
+    it) is no touch; ``max_force_n`` has it."""
+    touched = np.nonzero((push > 0.0) & np.array([e['mode'] == Mode.CONTACT.value
+                                                  for e in log]))[0]
     if not len(touched):
         return None
     t0 = log[touched[0]]['t_s']
