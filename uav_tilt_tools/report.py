@@ -66,22 +66,14 @@ def run(args):
     return 0 if summary['failure'] is None else 1
 
 
-def real_time_factor(plant_statuses):
-    """Sim time over wall time between the first and last plant/status, or None."""
-    spans = [(v.get('sim_time_s'), v.get('wall_time_s')) for _, v in plant_statuses]
-    spans = [(s, w) for s, w in spans if json_number(s) is not None and json_number(w) is not None]
-    if len(spans) < 2 or spans[-1][1] <= spans[0][1]:
-        return None
-    return (spans[-1][0] - spans[0][0]) / (spans[-1][1] - spans[0][1])
-
-
-def tick_rate_hz(controller_statuses):
-    """Control ticks over wall time from the first controller/status that counted a tick
-    to the last, or None. A loop that slowed for a while counts with the ticks it missed,
-    which a median of the statuses' windows would not."""
-    spans = [(json_number(v.get('ticks')), json_number(v.get('wall_time_s')))
-             for _, v in controller_statuses]
-    spans = [(n, w) for n, w in spans if n is not None and n > 0 and w is not None]
+def per_wall_second(statuses, key, from_first_count=False):
+    """How fast ``key`` grew over the statuses' ``wall_time_s``, first to last status that
+    gives both (from the first where ``key`` is above 0 with ``from_first_count``: a loop's
+    ticks, not its wait for sensors), or None. Over the whole span, a loop that slowed for a
+    while counts with what it missed, which a median of the statuses' windows would not."""
+    spans = [(json_number(v.get(key)), json_number(v.get('wall_time_s'))) for _, v in statuses]
+    spans = [(n, w) for n, w in spans if n is not None and w is not None
+             and (n > 0 or not from_first_count)]
     if len(spans) < 2 or spans[-1][1] <= spans[0][1]:
         return None
     return (spans[-1][0] - spans[0][0]) / (spans[-1][1] - spans[0][1])
@@ -107,8 +99,8 @@ def summarize(rec, tool_tip_x_m):
                               *(target[0], target[1][:, 2]) if target is not None
                               else (None, None))
     summary.update(
-        rtf=real_time_factor(recording.statuses(rec, names.PLANT_STATUS)),
-        controller_rate_hz=tick_rate_hz(ctrl),
+        rtf=per_wall_second(recording.statuses(rec, names.PLANT_STATUS), 'sim_time_s'),
+        controller_rate_hz=per_wall_second(ctrl, 'ticks', from_first_count=True),
         vision_fps=median_of(vision, 'fps'),
         vision_latency_ms_p95=median_of(vision, 'latency_ms_p95'))
     with_tasks(summary, task_summaries(rec, tool_tip_x_m))
