@@ -145,11 +145,11 @@ class PlantNode(Node):
         self._publish_target()
         self._publish_tick()
         self.tick_timer = self.create_timer(self._free_tick_period_s(), self.on_free_tick)
-        if self.cfg.mode == 'lockstep':
-            self.tick_timer.cancel()
-            self.create_timer(0.05, self.on_watchdog)
         self.status_due = time.monotonic()
         if self.cfg.mode == 'lockstep':
+            # realtime sends its status from the tick loop (a timer starves under overload)
+            self.tick_timer.cancel()
+            self.create_timer(0.05, self.on_watchdog)
             self.create_timer(1.0 / self.cfg.status_rate_hz, self.on_status)
         self.get_logger().info(
             f'plant up: mode={self.cfg.mode} rtf={self.target_rtf} '
