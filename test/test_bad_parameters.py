@@ -18,22 +18,27 @@ from ros_graph import REPO
      ["'scenario_file'", '/nonexistent/windy.yaml', 'no such file']),
     ('uav_tilt_sim.plant_node', 'mode:=fast', ["'mode'", "'fast'", "'lockstep'"]),
     ('uav_tilt_control.controller_node', 'contact_force:=4', ["'contact_force'", '4']),
-    ('uav_tilt_control.controller_node', 'mission.hold_time_s:=-1.0',
-     ["'mission.hold_time_s'", '-1.0', '[0.0, 600.0]']),
+    ('uav_tilt_control.controller_node', 'mission.contact.hold_time_s:=-1.0',
+     ["'mission.contact.hold_time_s'", '-1.0', '[0.0, 600.0]']),
     ('uav_tilt_vision.vision_node', 'detect_every:=2.5', ["'detect_every'", 'integer']),
-    ('uav_tilt_tools.recorder_node', 'flush_period_s:=often', ["'flush_period_s'", 'often']),
+    ('uav_tilt_tools.bag.recorder_node', 'flush_period_s:=often',
+     ["'flush_period_s'", 'often']),
     # files the node would write only at exit, or cannot make at all
     ('uav_tilt_sim.plant_node', 'summary_file:=/nonexistent/dir/timing.json',
      ["'summary_file'", 'No such file']),
-    ('uav_tilt_tools.recorder_node', 'output:=/proc/run.mcap', ["'output'", '/proc/run.mcap']),
+    ('uav_tilt_tools.bag.recorder_node', 'output:=/proc/run.mcap',
+     ["'output'", '/proc/run.mcap']),
     ('uav_tilt_control.controller_node', 'contact_force:=0.5',
      ["'contact_force'", '0.5', '(1, 9.6)']),
     # a misspelt name would leave its parameter at the default without a word
     ('uav_tilt_vision.vision_node', 'detect_evry:=3',
      ["unknown parameter 'detect_evry'", "'detect_every'"]),
     ('uav_tilt_control.controller_node', 'mission.hold_time:=3.0',
-     ["unknown parameter 'mission.hold_time'", "'mission.hold_time_s'"]),
-    ('uav_tilt_tools.foxglove_bridge', 'prot:=8765', ["unknown parameter 'prot'"]),
+     ["unknown parameter 'mission.hold_time'", "'mission.contact.hold_time_s'"]),
+    # a parameter of the mission's old flat group: its new place
+    ('uav_tilt_control.controller_node', 'mission.hold_time_s:=3.0',
+     ["'mission.hold_time_s' has moved", "'mission.contact.hold_time_s'"]),
+    ('uav_tilt_tools.graph.foxglove_bridge', 'prot:=8765', ["unknown parameter 'prot'"]),
 ])
 def test_a_bad_parameter_is_one_line_and_exit_code_2(tmp_path, module, value, words):
     fatal_line(tmp_path, module, '-p', value, words=words)
@@ -109,6 +114,6 @@ def test_a_recording_is_never_overwritten(tmp_path, output, held):
     earlier = tmp_path / 'runs' / 'gt' / held
     earlier.parent.mkdir(parents=True)
     earlier.write_bytes(b'an earlier run')
-    fatal_line(tmp_path, 'uav_tilt_tools.recorder_node', '-p', f'output:={output}',
+    fatal_line(tmp_path, 'uav_tilt_tools.bag.recorder_node', '-p', f'output:={output}',
                words=["'output'", str(earlier.relative_to(tmp_path)), 'never overwritten'])
     assert earlier.read_bytes() == b'an earlier run'

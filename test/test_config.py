@@ -74,3 +74,23 @@ def test_a_key_given_twice_in_a_file_is_refused_with_both_lines(tmp_path):
     # YAML's merge key still overrides what it merges
     path.write_text('base: &b {gain: 1.0, count: 2}\nother:\n  <<: *b\n  gain: 3.0\n')
     assert read_yaml(path)['other'] == {'gain': 3.0, 'count': 2}
+
+
+def _moved_cases():
+    """Every parameter of the mission's old flat group, and where it went."""
+    from uav_tilt_control.mission import MissionConfig
+
+    return sorted(MissionConfig.MOVED.items())
+
+
+@pytest.mark.parametrize('old, new', _moved_cases())
+def test_a_mission_parameter_by_its_old_flat_name_is_refused_naming_its_new_place(old, new):
+    from uav_tilt_control.controller_core import ControllerConfig
+
+    new_name = new[1:] if new.startswith('/') else 'mission.' + new
+    assert new_name in to_flat(ControllerConfig())       # the new place exists
+    for data in ({'mission.' + old: 1.0}, {'mission': {old: 1.0}}):
+        with pytest.raises(ConfigError) as err:
+            from_dict(ControllerConfig, data)
+        assert str(err.value) == (f"parameter 'mission.{old}' has moved: it is now "
+                                  f"'{new_name}'")

@@ -6,9 +6,10 @@ from scipy.spatial.transform import Rotation
 from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_common.planes import Plane
 from uav_tilt_common.state import VehicleState
-from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_common.vehicle import GRAVITY, VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.impedance import contact_depth_for_force
+from uav_tilt_control.types import ImpedanceSetpoint
 
 VEHICLE = VehicleParams()
 DT_S = 1.0 / 300.0
@@ -29,13 +30,22 @@ def _core(**kw):
     return core
 
 
-def test_mission_uses_the_impedance_contact_k_z():
+def test_the_law_holds_the_mission_s_push_with_its_own_contact_k_z():
     core = _core(**{'flight.impedance.contact.wn_rad_s': [4.0, 4.0, 5.0],
                     'contact_force': 3.0})
     k_z = VEHICLE.mass_kg * 5.0 ** 2
-    assert core.mission.k_contact_z_n_per_m == pytest.approx(k_z)
     assert core.mission.contact_force_n == 3.0
-    assert contact_depth_for_force(3.0, core.mission.k_contact_z_n_per_m) == 3.0 / k_z
+    law, weight_n = core.flight.impedance, VEHICLE.mass_kg * GRAVITY
+    push = ImpedanceSetpoint(lambda_d_t=np.array([0.0, 0.0, 1.5]), push_n=3.0,
+                             contact_gains=True)
+    # at rest push / K_z behind the reference: no spring force, the weight alone
+    at_depth = law.update(np.array([0.0, 0.0, 1.5 - contact_depth_for_force(3.0, k_z)]),
+                          np.zeros(3), push, np.zeros(3), 1.0 / 300.0)
+    np.testing.assert_allclose(at_depth, [0.0, 0.0, weight_n], atol=1e-9)
+    # at the reference itself the spring pulls back with the push
+    at_reference = law.update(np.array([0.0, 0.0, 1.5]), np.zeros(3), push, np.zeros(3),
+                              1.0 / 300.0)
+    np.testing.assert_allclose(at_reference, [0.0, 0.0, weight_n - 3.0], atol=1e-9)
 
 
 def test_contact_force_at_or_above_the_force_limit_is_refused():

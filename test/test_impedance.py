@@ -158,3 +158,50 @@ def test_hover_estimator_is_frozen_in_contact():
     k, _ = controller.gains(contact=True)
     assert controller.f_hover_n == 0.0
     assert z == pytest.approx(f_ext[2] / k[2], rel=0.02)
+
+
+def _push_on_a_wall(controller, push_n, k_wall_n_per_m, duration_s, trim):
+    """A point mass held against a wall of stiffness ``k_wall_n_per_m`` (x = 1, normal -x)
+    by a setpoint at the surface that asks for ``push_n``; returns the wall's pushes."""
+    R_map_t = np.column_stack([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])
+    setpoint = ImpedanceSetpoint(R_map_t=R_map_t, origin_map=np.array([1.0, 0.0, 0.0]),
+                                 push_n=push_n, trim_push=trim, contact_gains=True)
+    p, v = np.array([1.0, 0.0, 0.0]), np.zeros(3)
+    gravity = np.array([0.0, 0.0, -MASS_KG * GRAVITY])
+    pushes = []
+    for _ in range(int(round(duration_s / DT_S))):
+        f_wall = np.array([-k_wall_n_per_m * max(p[0] - 1.0, 0.0), 0.0, 0.0])
+        f_p = controller.update(p, v, setpoint, f_wall, DT_S)
+        v = v + (f_p + gravity + f_wall) / MASS_KG * DT_S
+        p = p + v * DT_S
+        pushes.append(-f_wall[0])
+    return np.array(pushes)
+
+
+def test_the_trim_gets_a_soft_wall_the_push_asked_for():
+    # a wall that gives way takes part of the depth: the spring alone pushes less
+    rng = np.random.default_rng()
+    k_wall, push_n = float(np.exp(rng.uniform(np.log(30.0), np.log(300.0)))), rng.uniform(2, 8)
+    config = ImpedanceConfig()
+    k_z = config.contact.k_c(MASS_KG)[0][2]
+    settle_s = 10.0 * config.force_tau_s + 8.0
+    untrimmed = _push_on_a_wall(ImpedanceController(MASS_KG, config), push_n, k_wall,
+                                settle_s, trim=False)
+    # springs in series: the law's K_z and the wall's
+    assert untrimmed[-1] == pytest.approx(push_n * k_wall / (k_wall + k_z), rel=0.01)
+    trimmed = _push_on_a_wall(ImpedanceController(MASS_KG, config), push_n, k_wall, settle_s,
+                              trim=True)
+    assert trimmed[-1] == pytest.approx(push_n, abs=0.01 * push_n)
+
+
+def test_the_trim_is_let_go_with_the_push():
+    law = ImpedanceController(MASS_KG)
+    _push_on_a_wall(law, 5.0, 50.0, 6.0, trim=True)
+    assert law.trim_n > 0.5                     # it held the soft wall's missing push
+    ratio = law.trim_n / 5.0
+    hold = dict(R_map_t=np.eye(3), contact_gains=True)
+    for push_n in np.linspace(5.0, 0.0, 50):
+        law.update(np.zeros(3), np.zeros(3), ImpedanceSetpoint(push_n=push_n, **hold),
+                   np.zeros(3), DT_S)
+        assert law.trim_n == pytest.approx(ratio * push_n)
+    assert law.trim_n == 0.0

@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from uav_tilt_common.config import ConfigError
+from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_common.state import VehicleState
 from uav_tilt_common.vehicle import GRAVITY, VehicleParams
 from uav_tilt_common.modes import Mode
-from uav_tilt_control.mission import MinJerk, Mission, MissionConfig
+from uav_tilt_control.impedance import ImpedanceConfig
+from uav_tilt_control.mission import Mission, MissionConfig
+from uav_tilt_control.trajectory import MinJerk
 from uav_tilt_control.target_estimator import TargetEstimate
 
 DT_S = 0.01
@@ -24,6 +26,16 @@ GEAR_Z_M = 0.1          # body origin height when standing on the ground
 VEHICLE = VehicleParams()
 WEIGHT_N = VEHICLE.mass_kg * GRAVITY
 PERFECT = TargetEstimate(P_POI, NORMAL, 0.02, True)
+# the impedance law's contact K_z, with which it holds a push as a depth (eq. (6) at rest)
+K_Z_N_PER_M = ImpedanceConfig().contact.k_c(VEHICLE.mass_kg)[0][2]
+
+
+def pushed_t(sp):
+    """(lambda_d, dlambda_d) in frame t as the impedance law tracks them: the push held
+    push_n / K_z behind the setpoint's reference."""
+    z_t = np.array([0.0, 0.0, 1.0])
+    return sp.lambda_d_t - sp.push_n / K_Z_N_PER_M * z_t, \
+        sp.dlambda_d_t - sp.dpush_n_s / K_Z_N_PER_M * z_t
 
 
 class Flight:
@@ -79,8 +91,9 @@ class Flight:
         return sp
 
     def _track(self, sp):
-        p = sp.origin_map + sp.R_map_t @ sp.lambda_d_t
-        v = sp.R_map_t @ sp.dlambda_d_t
+        lambda_t, dlambda_t = pushed_t(sp)
+        p = sp.origin_map + sp.R_map_t @ lambda_t
+        v = sp.R_map_t @ dlambda_t
         self.force_n = 0.0
         point, normal, reach_m = self.wall
         gap = (p - point) @ normal - VEHICLE.tool_tip_x_m
@@ -88,7 +101,7 @@ class Flight:
             p = p - gap * normal
             v = v - (v @ normal) * normal
             if sp.contact_gains:
-                self.force_n = -gap * self.mission.k_contact_z_n_per_m
+                self.force_n = -gap * K_Z_N_PER_M
         if p[2] < GEAR_Z_M:
             p[2], v = GEAR_Z_M, np.zeros(3)
         self.p, self.v = p, v
@@ -125,8 +138,8 @@ def touch_ticks(config, f_map, dt_s):
     low-pass (free_flight_contact_tau_s) passes free_flight_contact_n after
     tau ln(F / (F - F_min)), so within the tick after that."""
     f_n = float(np.linalg.norm(f_map))
-    felt_s = config.free_flight_contact_tau_s * math.log(
-        f_n / (f_n - config.free_flight_contact_n))
+    felt_s = config.bump.tau_s * math.log(
+        f_n / (f_n - config.bump.threshold_n))
     return math.floor(felt_s / dt_s) + 1
 
 
@@ -172,20 +185,21 @@ def test_happy_path_visits_every_mode_and_succeeds(target):
     # the standoff point: tool tip standoff_m from the surface, on the normal through the POI
     _, sp_end, p_end = by_mode[Mode.APPROACH][-1]
     r = p_end - target.p_poi_map
-    assert r @ target.normal_map == pytest.approx(cfg.standoff_m + tip, abs=cfg.arrive_tol_m)
-    assert np.linalg.norm(np.cross(r, target.normal_map)) < cfg.arrive_tol_m
+    assert r @ target.normal_map == pytest.approx(cfg.contact.standoff_m + tip,
+                                                  abs=cfg.flight.arrive_tol_m)
+    assert np.linalg.norm(np.cross(r, target.normal_map)) < cfg.flight.arrive_tol_m
     # the tool (x_FLU) points into the wall along the normal, so it reaches the POI
     x_flu = Rotation.from_euler('ZY', [sp_end.yaw_rad, sp_end.pitch_rad]).apply([1, 0, 0])
-    np.testing.assert_allclose(x_flu, -target.normal_map, atol=cfg.arrive_yaw_tol_rad)
+    np.testing.assert_allclose(x_flu, -target.normal_map, atol=cfg.flight.arrive_yaw_tol_rad)
     # HOLD: desired position behind the surface by F_d / K_z, held for hold_time_s
     hold = by_mode[Mode.HOLD]
     mission = flight.mission
-    assert hold[-1][1].lambda_d_t[2] == pytest.approx(tip - mission.contact_force_n
-                                                      / mission.k_contact_z_n_per_m)
-    assert hold[-1][0] - hold[0][0] == pytest.approx(cfg.hold_time_s, abs=2 * DT_S)
+    assert pushed_t(hold[-1][1])[0][2] == pytest.approx(tip - mission.contact_force_n
+                                                        / K_Z_N_PER_M)
+    assert hold[-1][0] - hold[0][0] == pytest.approx(cfg.contact.hold_time_s, abs=2 * DT_S)
     # compliant in contact, and while the retreat reference is still behind the surface
     assert all(sp.contact_gains == (mode in (Mode.CONTACT, Mode.HOLD) or (
-        mode == Mode.RETREAT and sp.lambda_d_t[2] < tip)) for _, mode, sp, _ in flight.log)
+        mode == Mode.RETREAT and pushed_t(sp)[0][2] < tip)) for _, mode, sp, _ in flight.log)
     assert any(mode == Mode.RETREAT and sp.contact_gains for _, mode, sp, _ in flight.log)
     assert flight.p[2] == pytest.approx(GEAR_Z_M)
 
@@ -229,19 +243,20 @@ def test_sensor_noise_in_free_flight_is_no_touch_and_the_vehicle_lands():
     assert not [e for e in flight.mission.events if e['reason'].startswith('touched')]
     # landed as without noise: once the low-passed speed has fallen from the descent's to
     # land_detect_speed_m_s, land_detect_s later
-    settle_s = cfg.speed_tau_s * math.log(cfg.descent_rate_m_s / cfg.land_detect_speed_m_s)
-    assert flight.t_s - touchdown_s <= settle_s + cfg.land_detect_s + 3 * DT_S
+    settle_s = cfg.flight.speed_tau_s * math.log(cfg.land.descent_rate_m_s
+                                                 / cfg.land.detect_speed_m_s)
+    assert flight.t_s - touchdown_s <= settle_s + cfg.land.detect_s + 3 * DT_S
 
 
 def test_a_noisy_f_t_makes_the_touch_firmer_not_false():
     # F/T noise that passes touch_threshold_n (0.4 N) on two ticks in a row every second or
     # so: the touch is felt where the tool really meets the wall, and the inspection works.
-    # Its 4 sigma (1-2 N) is more than the spring pushes with at touch_overrun_m past the
-    # surface (1 N at 10 N/m): the creep must go deeper to feel it.
+    # Its 4 sigma (1-2 N) is more than touch_overrun_n (1 N), the push the creep reaches
+    # past the estimated surface: it must push harder to feel the wall.
     rng = np.random.default_rng()
     sigma_f_n = rng.uniform(0.25, 0.5)
     flight = NoisyFlight(0.0, sigma_f_n)
-    assert 4.0 * sigma_f_n >= flight.mission.k_contact_z_n_per_m * flight.config.touch_overrun_m
+    assert 4.0 * sigma_f_n >= flight.config.contact.touch_overrun_n
     assert flight.mission.inspect()[0]
     pressed_at_n = []
     while flight.mission.mode != Mode.IDLE:
@@ -263,7 +278,8 @@ def test_references_are_consistent_and_speed_limited():
     flight.mission.inspect()
     flight.run_until(lambda f: f.mission.mode == Mode.IDLE, 150.0)
     cfg = flight.config
-    v_max = max(cfg.climb_speed_m_s, cfg.approach_speed_m_s, cfg.descent_rate_m_s)
+    v_max = max(cfg.flight.climb_speed_m_s, cfg.contact.approach_speed_m_s,
+                cfg.land.descent_rate_m_s)
     prev = None
     for (t, mode, sp, _), phase in zip(flight.log, flight.phases):
         p_map = sp.origin_map + sp.R_map_t @ sp.lambda_d_t
@@ -290,16 +306,16 @@ def test_nan_setpoint_rejected_and_counted():
     assert not ok
     # under ground, or low enough for the landing detector to call it landed
     cfg = flight.mission.config
-    for z in (-50.0, cfg.ground_z_m + 1.9 * cfg.land_detect_height_m):
+    for z in (-50.0, cfg.land.ground_z_m + 1.9 * cfg.land.detect_height_m):
         ok, msg = flight.mission.set_hover_setpoint([0.0, 0.0, z], 0.0)
         assert not ok and 'lowest hover' in msg, msg
     assert flight.mission.status['rejected_setpoints'] == 4
     # outside the geofence: too far from the take-off, too high
     home = flight.p.copy()
-    radius_m, height_m = cfg.fence_radius_m, cfg.fence_height_m
+    radius_m, height_m = cfg.failsafe.fence_radius_m, cfg.failsafe.fence_height_m
     for p, why in (([home[0] + radius_m + 0.1, home[1], 2.0], 'fence_radius_m'),
                    ([home[0], home[1] - 1e12, 2.0], 'fence_radius_m'),
-                   ([home[0], home[1], cfg.ground_z_m + height_m + 0.1], 'fence_height_m')):
+                   ([home[0], home[1], cfg.land.ground_z_m + height_m + 0.1], 'fence_height_m')):
         ok, msg = flight.mission.set_hover_setpoint(p, 0.0)
         assert not ok and 'geofence' in msg and why in msg, msg
     assert flight.mission.status['rejected_setpoints'] == 7
@@ -329,12 +345,12 @@ def test_stale_odometry_blind_descent_then_idle():
     assert flight.mission.mode == Mode.IDLE
     v_z = np.array([sp.dlambda_d_t[2] for sp in sps])
     assert np.all(v_z <= 1e-12)
-    assert v_z.min() == pytest.approx(-cfg.failsafe_descent_rate_m_s, rel=1e-3)
+    assert v_z.min() == pytest.approx(-cfg.failsafe.descent_rate_m_s, rel=1e-3)
     assert all(sp.pitch_rad == 0.0 and not sp.contact_gains for sp in sps)
-    assert sps[-1].lambda_d_t[2] == pytest.approx(cfg.ground_z_m)
+    assert sps[-1].lambda_d_t[2] == pytest.approx(cfg.land.ground_z_m)
     # blind: idle only after the whole descent plus the margin
-    t_descent = 1.875 * (z0 - cfg.ground_z_m) / cfg.failsafe_descent_rate_m_s
-    assert len(sps) * DT_S >= t_descent + cfg.failsafe_land_margin_s
+    t_descent = 1.875 * (z0 - cfg.land.ground_z_m) / cfg.failsafe.descent_rate_m_s
+    assert len(sps) * DT_S >= t_descent + cfg.failsafe.land_margin_s
 
 
 def test_nonfinite_state_counts_as_stale():
@@ -347,7 +363,7 @@ def test_nonfinite_state_counts_as_stale():
 
 def test_force_above_limit_retreats_then_lands():
     flight = _in_mode(Mode.HOLD)
-    flight.step(force_n=flight.config.force_limit_n + 1.0)
+    flight.step(force_n=flight.config.failsafe.force_limit_n + 1.0)
     assert flight.mission.mode == Mode.RETREAT
     assert flight.mission.status['failsafe_reason'] == 'force_limit'
     flight.run_to(Mode.IDLE)
@@ -364,17 +380,17 @@ def test_target_lost_during_approach_holds_then_retreats():
     flight.run_for(1.0)
     t_lost = flight.t_s
     flight.run_to(Mode.TARGET_LOST, target=None, timeout_s=60.0)
-    assert flight.t_s - t_lost > 2 * cfg.target_lost_retreat_s      # it flew on
-    standoff_t = np.array([0.0, 0.0, cfg.standoff_m + VEHICLE.tool_tip_x_m])
-    p_t = flight.mission._R_map_t.T @ (flight.p - flight.mission._origin_map)
-    assert np.linalg.norm(p_t - standoff_t) < cfg.arrive_tol_m + 1e-9
+    assert flight.t_s - t_lost > 2 * cfg.contact.target_lost_retreat_s      # it flew on
+    standoff_t = np.array([0.0, 0.0, cfg.contact.standoff_m + VEHICLE.tool_tip_x_m])
+    p_t = flight.mission.reference.to_frame(flight.p)
+    assert np.linalg.norm(p_t - standoff_t) < cfg.flight.arrive_tol_m + 1e-9
     t_there = flight.t_s
     flight.run_for(1.5, target=None)
     assert flight.mission.mode == Mode.TARGET_LOST
     assert np.linalg.norm(flight.log[-1][2].dlambda_d_t) < 1e-9   # holding still
     flight.run_to(Mode.RETREAT, target=None, timeout_s=5.0)
     assert flight.t_s - t_there == pytest.approx(
-        cfg.target_lost_retreat_s - cfg.target_lost_hold_s, abs=2 * DT_S)
+        cfg.contact.target_lost_retreat_s - cfg.contact.target_lost_hold_s, abs=2 * DT_S)
     assert flight.mission.status['failsafe_reason'] == 'target_lost'
 
 
@@ -385,10 +401,10 @@ def test_target_lost_in_contact_holds_then_retreats():
     flight = _in_mode(Mode.CONTACT, cfg)
     t_lost = flight.t_s       # the last image was taken PERFECT.age_s before the last tick
     flight.run_to(Mode.TARGET_LOST, target=None, timeout_s=5.0)
-    assert flight.t_s - t_lost == pytest.approx(cfg.target_lost_hold_s - PERFECT.age_s,
+    assert flight.t_s - t_lost == pytest.approx(cfg.contact.target_lost_hold_s - PERFECT.age_s,
                                                 abs=2 * DT_S)
     flight.run_to(Mode.RETREAT, target=None, timeout_s=5.0)
-    assert flight.t_s - t_lost == pytest.approx(cfg.target_lost_retreat_s - PERFECT.age_s,
+    assert flight.t_s - t_lost == pytest.approx(cfg.contact.target_lost_retreat_s - PERFECT.age_s,
                                                 abs=2 * DT_S)
     assert flight.mission.status['failsafe_reason'] == 'target_lost'
 
@@ -408,9 +424,9 @@ def test_contact_keeps_the_target_once_the_tool_hides_it():
     flight.run_to(Mode.TARGET_LOST, target=None, timeout_s=5.0)
     flight.step()
     assert flight.mission.mode == Mode.CONTACT
-    flight.run_until(lambda f: f.mission._tool_hides_poi(), 30.0)
+    flight.run_until(lambda f: f.mission.behaviours[Mode.CONTACT].tool_hides_poi(), 30.0)
     gap_m = (flight.p - P_POI) @ NORMAL - VEHICLE.tool_tip_x_m
-    assert gap_m == pytest.approx(cfg.tool_occlusion_range_m, abs=0.01)
+    assert gap_m == pytest.approx(cfg.contact.tool_occlusion_range_m, abs=0.01)
     # within the occlusion range the camera cannot see the POI: the push goes on
     seen = len(flight.modes)
     flight.run_to(Mode.HOLD, target=None, timeout_s=30.0)
@@ -421,7 +437,7 @@ def test_contact_lost_during_hold_counted_and_not_success():
     cfg = MissionConfig()
     flight = _in_mode(Mode.HOLD, cfg)
     flight.run_for(1.0)
-    flight.run_for(cfg.contact_lost_s + 0.05, force_n=0.0)
+    flight.run_for(cfg.contact.lost_s + 0.05, force_n=0.0)
     assert flight.mission.status['contact_lost'] == 1
     assert flight.mission.mode == Mode.HOLD
     flight.run_to(Mode.IDLE, timeout_s=60.0)
@@ -433,7 +449,7 @@ def test_contact_lost_during_hold_counted_and_not_success():
 def test_short_force_dropout_is_not_contact_lost():
     cfg = MissionConfig()
     flight = _in_mode(Mode.HOLD, cfg)
-    flight.run_for(cfg.contact_lost_s - 0.03, force_n=0.0)
+    flight.run_for(cfg.contact.lost_s - 0.03, force_n=0.0)
     flight.run_to(Mode.IDLE, timeout_s=60.0)
     assert flight.mission.status['contact_lost'] == 0 and flight.mission.status['success']
 
@@ -449,13 +465,13 @@ def test_a_candidate_is_confirmed_by_agreeing_measurements_and_one_elsewhere_res
     flight = Flight(cfg)
     assert flight.mission.inspect()[0]
     flight.run_to(Mode.SEARCH, target=None, timeout_s=30.0)
-    elsewhere = PERFECT._replace(p_poi_map=P_POI + [0.0, 2.0 * cfg.confirm_radius_m, 0.0])
+    elsewhere = PERFECT._replace(p_poi_map=P_POI + [0.0, 2.0 * cfg.search.confirm_radius_m, 0.0])
     # each tick a new measurement (a newer stamp); the one elsewhere breaks the run
-    for k in range(cfg.confirm_n - 1):
+    for k in range(cfg.search.confirm_n - 1):
         flight.step(target=PERFECT)
     flight.step(target=elsewhere)
     flight.step(target=PERFECT)
-    for k in range(cfg.confirm_n - 2):
+    for k in range(cfg.search.confirm_n - 2):
         flight.step(target=PERFECT)
         assert flight.mission.mode == Mode.SEARCH, k
     flight.step(target=PERFECT)
@@ -463,13 +479,13 @@ def test_a_candidate_is_confirmed_by_agreeing_measurements_and_one_elsewhere_res
 
 
 def test_search_timeout_lands():
-    cfg = MissionConfig(search_timeout_s=2.0, search_yaw_rate_rad_s=0.2)
+    cfg = from_dict(MissionConfig, {'search.timeout_s': 2.0, 'search.yaw_rate_rad_s': 0.2})
     flight = _in_mode(Mode.SEARCH, cfg)
     flight.run_to(Mode.LAND, target=None, timeout_s=3.0)
     assert flight.mission.status['failsafe_reason'] == 'target_not_found'
     search_yaws = [sp.yaw_rad for _, mode, sp, _ in flight.log if mode == Mode.SEARCH]
     assert search_yaws[-1] - search_yaws[0] == pytest.approx(
-        cfg.search_yaw_rate_rad_s * cfg.search_timeout_s, abs=0.01)
+        cfg.search.yaw_rate_rad_s * cfg.search.timeout_s, abs=0.01)
 
 
 def test_search_backs_off_what_the_tool_touches_then_turns_on():
@@ -477,7 +493,7 @@ def test_search_backs_off_what_the_tool_touches_then_turns_on():
     flight = _in_mode(Mode.SEARCH, cfg)
     flight.run_for(2.0, target=None)
     # below the threshold (a brush), however long, the turn goes on
-    flight.run_for(1.0, target=None, f_map=np.array([0.0, -0.9, 0.0]) * cfg.free_flight_contact_n)
+    flight.run_for(1.0, target=None, f_map=np.array([0.0, -0.9, 0.0]) * cfg.bump.threshold_n)
     assert flight.mission.phase == 'sweep'
     flight.run_for(0.3, target=None)        # the brush forgotten (10 tau)
     push = np.array([0.0, -1.2, 0.5])       # the vehicle pushed away from something in +y
@@ -487,32 +503,33 @@ def test_search_backs_off_what_the_tool_touches_then_turns_on():
     flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
     # backed off along the push, the turn standing still meanwhile
     np.testing.assert_allclose(flight.p - p0, push / np.linalg.norm(push)
-                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
+                               * cfg.bump.clearance_m, atol=cfg.flight.arrive_tol_m)
     assert len({sp.yaw_rad for _, _, sp, _ in flight.log[start:-1]}) == 1
     yaw = flight.log[-1][2].yaw_rad
     flight.run_for(1.0, target=None)
-    assert flight.log[-1][2].yaw_rad - yaw == pytest.approx(cfg.search_yaw_rate_rad_s, rel=0.05)
+    assert flight.log[-1][2].yaw_rad - yaw == pytest.approx(cfg.search.yaw_rate_rad_s, rel=0.05)
 
 
 def test_a_climb_that_meets_a_wall_turns_where_it_backed_off():
-    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
+    cfg = from_dict(MissionConfig, {'search.yaw_rate_rad_s': 1.0, 'flight.yaw_rate_rad_s': 1.0})
     flight = _in_mode(Mode.SEARCH, cfg)
     flight.run_until(lambda f: f.mission.phase == 'climb', 10.0, target=None)
     flight.run_for(0.5, target=None)
     flight.touch(np.array([-1.5, 0.0, -1.5]), target=None)   # a wall leaning over
     flight.run_until(lambda f: f.mission.phase == 'sweep', 10.0, target=None)
     resumed_s, z = flight.t_s, flight.p[2]
-    assert z < cfg.takeoff_altitude_m + cfg.search_climb_m - cfg.free_flight_clearance_m / 2
+    assert z < cfg.flight.takeoff_altitude_m + cfg.search.climb_m - cfg.bump.clearance_m / 2
     # the second level's whole turn, there, before the search goes lower
     flight.run_until(lambda f: f.mission.phase == 'descend', 10.0, target=None)
-    assert flight.t_s - resumed_s == pytest.approx(2 * np.pi / cfg.search_yaw_rate_rad_s,
+    assert flight.t_s - resumed_s == pytest.approx(2 * np.pi / cfg.search.yaw_rate_rad_s,
                                                    abs=0.1)
 
 
 def _climb_time_s(cfg):
     """The take-off's own climb from the ground, MinJerk at climb_speed_m_s."""
     return MinJerk(0.0, np.array([0.0, 0.0, GEAR_Z_M]),
-                   np.array([0.0, 0.0, cfg.takeoff_altitude_m]), cfg.climb_speed_m_s).T
+                   np.array([0.0, 0.0, cfg.flight.takeoff_altitude_m]),
+                   cfg.flight.climb_speed_m_s).T
 
 
 def test_a_takeoff_that_meets_a_wall_backs_off_horizontally_and_climbs_on():
@@ -521,7 +538,7 @@ def test_a_takeoff_that_meets_a_wall_backs_off_horizontally_and_climbs_on():
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.p[2] > 0.8, 10.0, target=None)
     # below the threshold the climb goes on
-    flight.run_for(0.3, target=None, f_map=np.array([-0.9, 0.0, 0.0]) * cfg.free_flight_contact_n)
+    flight.run_for(0.3, target=None, f_map=np.array([-0.9, 0.0, 0.0]) * cfg.bump.threshold_n)
     assert flight.mission.phase == ''
     flight.run_for(0.3, target=None)
     # the tool under a wall leaning over the start: pushed away from it and down
@@ -533,12 +550,12 @@ def test_a_takeoff_that_meets_a_wall_backs_off_horizontally_and_climbs_on():
     moved = flight.p - p0
     # backed off along the push's horizontal part only: the ground is below
     np.testing.assert_allclose(moved[:2], away[:2] / np.linalg.norm(away)
-                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
-    assert abs(moved[2]) < cfg.arrive_tol_m
+                               * cfg.bump.clearance_m, atol=cfg.flight.arrive_tol_m)
+    assert abs(moved[2]) < cfg.flight.arrive_tol_m
     # then up to the take-off altitude from there, and on with the mission
     flight.run_to(Mode.HOVER, target=None, timeout_s=20.0)
-    np.testing.assert_allclose(flight.p, [*(p0[:2] + moved[:2]), cfg.takeoff_altitude_m],
-                               atol=cfg.arrive_tol_m)
+    np.testing.assert_allclose(flight.p, [*(p0[:2] + moved[:2]), cfg.flight.takeoff_altitude_m],
+                               atol=cfg.flight.arrive_tol_m)
     flight.run_to(Mode.SEARCH, target=None, timeout_s=5.0)
 
 
@@ -557,17 +574,18 @@ def test_a_takeoff_pushed_down_from_above_lands():
 
 
 def test_a_takeoff_that_never_reaches_its_altitude_lands():
-    cfg = MissionConfig(takeoff_timeout_s=float(np.random.default_rng().uniform(5.0, 15.0)))
+    cfg = from_dict(MissionConfig, {
+        'flight.takeoff_timeout_s': float(np.random.default_rng().uniform(5.0, 15.0))})
     flight = Flight(cfg)
     assert flight.mission.inspect()[0]
     t0 = flight.t_s
     # something keeps meeting the tool as it climbs past 1 m
     while flight.mission.mode == Mode.TAKEOFF:
-        assert flight.t_s < t0 + _climb_time_s(cfg) + cfg.takeoff_timeout_s + 1.0
+        assert flight.t_s < t0 + _climb_time_s(cfg) + cfg.flight.takeoff_timeout_s + 1.0
         bumped = flight.p[2] > 1.0 and flight.mission.phase == ''
         flight.step(target=None, f_map=np.array([-1.5, 0.0, 0.0]) if bumped else None)
     assert flight.mission.mode == Mode.LAND
-    assert flight.t_s - t0 == pytest.approx(_climb_time_s(cfg) + cfg.takeoff_timeout_s,
+    assert flight.t_s - t0 == pytest.approx(_climb_time_s(cfg) + cfg.flight.takeoff_timeout_s,
                                             abs=2 * DT_S)
     flight.run_to(Mode.IDLE, target=None, timeout_s=20.0)
     assert flight.mission.status['failsafe_reason'] == 'takeoff_timeout'
@@ -590,18 +608,18 @@ def test_a_landing_that_meets_a_wall_backs_off_horizontally_and_descends_on():
     flight.run_until(lambda f: f.mission.phase == '', 10.0, target=None)
     moved = flight.p - p0
     np.testing.assert_allclose(moved[:2], push[:2] / np.linalg.norm(push[:2])
-                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
-    assert abs(moved[2]) < cfg.arrive_tol_m
+                               * cfg.bump.clearance_m, atol=cfg.flight.arrive_tol_m)
+    assert abs(moved[2]) < cfg.flight.arrive_tol_m
     flight.run_to(Mode.IDLE, target=None, timeout_s=20.0)
     np.testing.assert_allclose(flight.p, [*(p0[:2] + moved[:2]), GEAR_Z_M],
-                               atol=cfg.arrive_tol_m)
+                               atol=cfg.flight.arrive_tol_m)
 
 
 def _landing_on_a_roof():
     """Hovering, then landing where the ground stands a fresh 0.35-3 m above ground_z_m
     (a roof, a box; or ground_z_m set too low): the tracker stops the body there."""
     roof_m = float(np.random.default_rng().uniform(0.35, 3.0))
-    cfg = MissionConfig(ground_z_m=-roof_m)
+    cfg = from_dict(MissionConfig, {'land.ground_z_m': -roof_m})
     flight = _hovering(cfg)
     assert flight.mission.land()[0]
     return flight, roof_m
@@ -617,7 +635,7 @@ def _resting_thrust_n(cfg):
     has pulled down long enough: less than any vehicle in the air would need (a fresh
     share of land_detect_thrust_ratio of the weight)."""
     return float(np.random.default_rng().uniform(0.0, 0.99)) * (
-        cfg.land_detect_thrust_ratio * WEIGHT_N)
+        cfg.land.detect_thrust_ratio * WEIGHT_N)
 
 
 def test_a_landing_stopped_above_ground_z_lands_where_it_stopped():
@@ -625,12 +643,12 @@ def test_a_landing_stopped_above_ground_z_lands_where_it_stopped():
     cfg = flight.config
     # stopped once its setpoint passes land_detect_height_m below it and pulling down,
     # landed land_detect_s on
-    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land_detect_height_m, 30.0,
+    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land.detect_height_m, 30.0,
                      target=None)
     flight.thrust_up_n = _resting_thrust_n(cfg)
     t_held = flight.t_s
-    flight.run_to(Mode.IDLE, timeout_s=cfg.land_detect_s + 0.1, target=None)
-    assert flight.t_s - t_held == pytest.approx(cfg.land_detect_s, abs=2 * DT_S)
+    flight.run_to(Mode.IDLE, timeout_s=cfg.land.detect_s + 0.1, target=None)
+    assert flight.t_s - t_held == pytest.approx(cfg.land.detect_s, abs=2 * DT_S)
     event = flight.mission.events[-1]
     assert event['reason'] == f'landed {GEAR_Z_M + roof_m:.2f} m above ground_z_m'
     assert flight.mission.status['failsafe_reason'] == ''
@@ -640,14 +658,14 @@ def test_a_landing_held_by_its_tool_is_not_landed():
     flight, roof_m = _landing_on_a_roof()
     cfg = flight.config
     # the tool rests on a ledge: the ledge pushes it up, the vehicle hangs from it
-    hanging = dict(target=None, f_map=np.array([0.0, 0.0, 2.0 * cfg.free_flight_contact_n]))
-    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land_detect_height_m, 30.0,
+    hanging = dict(target=None, f_map=np.array([0.0, 0.0, 2.0 * cfg.bump.threshold_n]))
+    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land.detect_height_m, 30.0,
                      **hanging)
     flight.thrust_up_n = _resting_thrust_n(cfg)
-    flight.run_for(2.0 * cfg.land_detect_s, **hanging)
+    flight.run_for(2.0 * cfg.land.detect_s, **hanging)
     assert flight.mission.mode == Mode.LAND
     # off the ledge onto its gear: landed
-    flight.run_to(Mode.IDLE, timeout_s=cfg.land_detect_s + 0.1, target=None)
+    flight.run_to(Mode.IDLE, timeout_s=cfg.land.detect_s + 0.1, target=None)
 
 
 def test_a_vehicle_hovering_above_its_descent_is_not_landed():
@@ -660,15 +678,15 @@ def test_a_vehicle_hovering_above_its_descent_is_not_landed():
     cfg = flight.config
     rng = np.random.default_rng()
     flight.thrust_up_n = float(rng.uniform(0.5, 1.0)) * WEIGHT_N
-    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land_detect_height_m, 30.0,
+    flight.run_until(lambda f: _setpoint_z(f) < GEAR_Z_M - cfg.land.detect_height_m, 30.0,
                      target=None)
-    flight.run_for(4.0 * cfg.land_detect_s, target=None)
+    flight.run_for(4.0 * cfg.land.detect_s, target=None)
     assert flight.mission.mode == Mode.LAND
     flight.thrust_up_n = None         # unknown thrust: no such landing either
-    flight.run_for(2.0 * cfg.land_detect_s, target=None)
+    flight.run_for(2.0 * cfg.land.detect_s, target=None)
     assert flight.mission.mode == Mode.LAND
     flight.thrust_up_n = _resting_thrust_n(cfg)
-    flight.run_to(Mode.IDLE, timeout_s=cfg.land_detect_s + 0.1, target=None)
+    flight.run_to(Mode.IDLE, timeout_s=cfg.land.detect_s + 0.1, target=None)
     assert flight.mission.events[-1]['reason'] == (
         f'landed {GEAR_Z_M + roof_m:.2f} m above ground_z_m')
 
@@ -687,20 +705,20 @@ def test_an_upset_stops_the_rotors():
     flight = _in_mode(Mode.APPROACH, cfg)
     rng = np.random.default_rng()
     # tilted past the limit for less than upset_s, then upright again: flying on
-    _tilted(flight, cfg.upset_tilt_rad + rng.uniform(0.02, 2.0))
-    flight.run_for(cfg.upset_s - 3 * DT_S)
+    _tilted(flight, cfg.failsafe.upset_tilt_rad + rng.uniform(0.02, 2.0))
+    flight.run_for(cfg.failsafe.upset_s - 3 * DT_S)
     del flight._track
     flight.run_for(0.5)
     assert flight.mission.mode == Mode.APPROACH
     # just under the limit for long: flying on
-    _tilted(flight, cfg.upset_tilt_rad - 0.02)
-    flight.run_for(5.0 * cfg.upset_s)
+    _tilted(flight, cfg.failsafe.upset_tilt_rad - 0.02)
+    flight.run_for(5.0 * cfg.failsafe.upset_s)
     assert flight.mission.mode == Mode.APPROACH
     # past it for upset_s: the rotors stop, the plan ends
-    _tilted(flight, cfg.upset_tilt_rad + rng.uniform(0.02, 2.0))
+    _tilted(flight, cfg.failsafe.upset_tilt_rad + rng.uniform(0.02, 2.0))
     t0 = flight.t_s
-    flight.run_until(lambda f: f.mission.mode != Mode.APPROACH, cfg.upset_s + 0.1)
-    assert flight.t_s - t0 == pytest.approx(cfg.upset_s, abs=2 * DT_S)
+    flight.run_until(lambda f: f.mission.mode != Mode.APPROACH, cfg.failsafe.upset_s + 0.1)
+    assert flight.t_s - t0 == pytest.approx(cfg.failsafe.upset_s, abs=2 * DT_S)
     assert flight.mission.mode == Mode.IDLE
     status = flight.mission.status
     assert status['failsafe_reason'] == 'upset' and not status['success']
@@ -720,7 +738,7 @@ def test_hover_backs_off_what_the_tool_touches_and_holds_there():
     flight.run_for(2.0, target=None)
     assert flight.mission.mode == Mode.HOVER
     np.testing.assert_allclose(flight.p - p0, push / np.linalg.norm(push)
-                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
+                               * cfg.bump.clearance_m, atol=cfg.flight.arrive_tol_m)
     assert flight.mission.set_hover_setpoint([0.0, 0.0, 2.0], 0.0)[0]
 
 
@@ -732,15 +750,18 @@ def _held(flight):
 
 
 def _deadline_s(flight):
-    segment = flight.mission._traj
-    return segment.t0_s + segment.T + flight.config.arrive_timeout_s
+    segment = flight.mission.reference.segment
+    return segment.t0_s + segment.T + flight.config.flight.arrive_timeout_s
 
 
 def _in_mode_held(mode, cfg):
-    """A flight in ``mode`` (RETREAT: an abort in HOLD), held half a second in."""
+    """A flight in ``mode`` (RETREAT: an abort in HOLD, once the push is let go), held
+    half a second in."""
     flight = _in_mode(Mode.HOLD if mode == Mode.RETREAT else mode, cfg)
     if mode == Mode.RETREAT:
         assert flight.mission.abort()[0]
+        assert flight.mission.phase == 'release'
+        flight.run_until(lambda f: f.mission.phase == '', 2.0 * cfg.contact.press_time_s)
     flight.run_for(0.5)
     assert flight.mission.mode == mode
     _held(flight)
@@ -749,7 +770,8 @@ def _in_mode_held(mode, cfg):
 
 @pytest.mark.parametrize('mode', [Mode.APPROACH, Mode.RETREAT])
 def test_a_segment_the_vehicle_cannot_reach_lands(mode):
-    cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
+    cfg = from_dict(MissionConfig, {
+        'flight.arrive_timeout_s': float(np.random.default_rng().uniform(2.0, 20.0))})
     flight = _in_mode_held(mode, cfg)
     deadline_s = _deadline_s(flight)
     flight.run_until(lambda f: f.mission.mode != mode, deadline_s - flight.t_s + 1.0)
@@ -763,7 +785,8 @@ def test_a_segment_the_vehicle_cannot_reach_lands(mode):
 
 @pytest.mark.parametrize('mode', [Mode.APPROACH, Mode.RETREAT])
 def test_an_arrival_late_but_within_the_timeout_goes_on(mode):
-    cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
+    cfg = from_dict(MissionConfig, {
+        'flight.arrive_timeout_s': float(np.random.default_rng().uniform(2.0, 20.0))})
     flight = _in_mode_held(mode, cfg)
     flight.run_until(lambda f: f.t_s > _deadline_s(f) - 0.1, 60.0)
     del flight._track
@@ -772,7 +795,8 @@ def test_an_arrival_late_but_within_the_timeout_goes_on(mode):
 
 
 def test_a_back_off_that_is_held_goes_on_from_where_it_got_to():
-    cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
+    cfg = from_dict(MissionConfig, {
+        'flight.arrive_timeout_s': float(np.random.default_rng().uniform(2.0, 20.0))})
     flight = _hovering(cfg)
     flight.touch(np.array([0.0, -1.5, 0.0]), target=None)
     assert flight.mission.phase == 'clear'
@@ -787,8 +811,8 @@ def test_a_back_off_that_is_held_goes_on_from_where_it_got_to():
 
 @pytest.mark.parametrize('takeoff_m, low_m', [(1.5, 0.9), (0.8, 0.6)])
 def test_search_turns_at_the_takeoff_altitude_higher_and_lower_then_lands(takeoff_m, low_m):
-    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0,
-                        takeoff_altitude_m=takeoff_m)
+    cfg = from_dict(MissionConfig, {'search.yaw_rate_rad_s': 1.0, 'flight.yaw_rate_rad_s': 1.0,
+                                    'flight.takeoff_altitude_m': takeoff_m})
     flight = _in_mode(Mode.SEARCH, cfg)
     start = len(flight.log)
     flight.run_to(Mode.LAND, target=None, timeout_s=60.0)
@@ -799,13 +823,13 @@ def test_search_turns_at_the_takeoff_altitude_higher_and_lower_then_lands(takeof
     for (_, mode, sp, p), phase in zip(flight.log[start:], flight.phases[start:]):
         if mode == Mode.SEARCH and phase == 'sweep':
             turns.setdefault(round(p[2], 2), []).append(sp.yaw_rad)
-    assert list(turns) == pytest.approx([takeoff_m, takeoff_m + cfg.search_climb_m, low_m])
+    assert list(turns) == pytest.approx([takeoff_m, takeoff_m + cfg.search.climb_m, low_m])
     for yaws in turns.values():
         assert np.ptp(np.unwrap(yaws)) == pytest.approx(2 * np.pi, abs=0.05)
 
 
 def test_after_its_turns_the_search_faces_the_wall_it_saw_from_both_ends_then_lands():
-    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
+    cfg = from_dict(MissionConfig, {'search.yaw_rate_rad_s': 1.0, 'flight.yaw_rate_rad_s': 1.0})
     flight = _in_mode(Mode.SEARCH, cfg)
     # a wall 4 m north leaning 20 degrees back, seen from x = -3 to 1 m during the first
     # turn; and the ground, which is no wall
@@ -833,12 +857,12 @@ def test_after_its_turns_the_search_faces_the_wall_it_saw_from_both_ends_then_la
         if mode == Mode.SEARCH and phase == 'sweep':
             sweeps.setdefault((round(p[0], 1), round(p[1], 1), round(p[2], 1)), []).append(
                 sp.yaw_rad)
-    assert [k[1] for k in sweeps] == pytest.approx([4.0 - cfg.search_face_m] * 2, abs=0.1)
+    assert [k[1] for k in sweeps] == pytest.approx([4.0 - cfg.search.face_m] * 2, abs=0.1)
     assert sorted(k[0] for k in sweeps) == pytest.approx([-3.0, 1.0], abs=0.1)
     for (x, y, z), yaws in sweeps.items():
-        assert z == pytest.approx(cfg.takeoff_altitude_m, abs=0.05)
+        assert z == pytest.approx(cfg.flight.takeoff_altitude_m, abs=0.05)
         yaws = np.unwrap(yaws)
-        assert np.ptp(yaws) == pytest.approx(cfg.search_face_turn_rad, abs=0.05)
+        assert np.ptp(yaws) == pytest.approx(cfg.search.face_turn_rad, abs=0.05)
         # across the wall: centred on the heading that looks into it (north)
         assert np.mean([yaws.min(), yaws.max()]) == pytest.approx(np.pi / 2, abs=0.05)
 
@@ -850,12 +874,12 @@ def test_under_a_wall_leaning_over_the_start_the_search_climbs_as_far_as_the_too
     # the takeoff altitude it leaves the tool's reach (tool_tip_x_m plus
     # search_wall_clearance_m) less room than search_climb_m needs, or none.
     rng = np.random.default_rng()
-    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
+    cfg = from_dict(MissionConfig, {'search.yaw_rate_rad_s': 1.0, 'flight.yaw_rate_rad_s': 1.0})
     flight = _in_mode(Mode.SEARCH, cfg)
     lean = np.radians(rng.uniform(10.0, 30.0))
     n = np.array([0.0, -np.cos(lean), -np.sin(lean)])
-    reach_m = VEHICLE.tool_tip_x_m + cfg.search_wall_clearance_m
-    climb_room_m = rng.uniform(0.2, 0.8) * cfg.search_climb_m if room == 'some' else 0.0
+    reach_m = VEHICLE.tool_tip_x_m + cfg.search.wall_clearance_m
+    climb_room_m = rng.uniform(0.2, 0.8) * cfg.search.climb_m if room == 'some' else 0.0
     p0 = flight.p.copy()
     # horizontally this far from the start's vertical at the takeoff altitude
     wall_m = reach_m + climb_room_m * np.tan(lean) - (0.0 if room == 'some' else 0.05)
@@ -873,16 +897,16 @@ def test_under_a_wall_leaning_over_the_start_the_search_climbs_as_far_as_the_too
     assert flight.mission.phase == 'climb'
     flight.run_until(lambda f: f.mission.phase == 'sweep', 20.0, target=None)
     climbed_m = flight.p[2] - p0[2]
-    assert climbed_m == pytest.approx(climb_room_m, abs=cfg.arrive_tol_m)
+    assert climbed_m == pytest.approx(climb_room_m, abs=cfg.flight.arrive_tol_m)
     # the tool's reach, turning there, keeps the clearance from the wall (horizontally)
     clear_m = ((flight.p - on_wall) @ n) / np.cos(lean) - VEHICLE.tool_tip_x_m
-    assert clear_m == pytest.approx(cfg.search_wall_clearance_m,
-                                    abs=cfg.arrive_tol_m * np.tan(lean) + 1e-6)
+    assert clear_m == pytest.approx(cfg.search.wall_clearance_m,
+                                    abs=cfg.flight.arrive_tol_m * np.tan(lean) + 1e-6)
     flight.run_until(lambda f: f.mission.phase == 'descend', 20.0, target=None)
 
 
 def test_without_a_wall_seen_the_search_lands_after_its_turns():
-    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=1.0)
+    cfg = from_dict(MissionConfig, {'search.yaw_rate_rad_s': 1.0, 'flight.yaw_rate_rad_s': 1.0})
     flight = _in_mode(Mode.SEARCH, cfg)
     flight.run_to(Mode.LAND, target=None, timeout_s=60.0)
     assert 'face' not in flight.phases
@@ -890,7 +914,7 @@ def test_without_a_wall_seen_the_search_lands_after_its_turns():
 
 def test_the_search_turns_no_faster_than_the_yaw_reference():
     # asked to sweep at twice yaw_rate_rad_s, a counted turn is still a whole turn
-    cfg = MissionConfig(search_yaw_rate_rad_s=1.0, yaw_rate_rad_s=0.5)
+    cfg = from_dict(MissionConfig, {'search.yaw_rate_rad_s': 1.0, 'flight.yaw_rate_rad_s': 0.5})
     flight = _in_mode(Mode.SEARCH, cfg)
     start = len(flight.log)
     flight.run_until(lambda f: f.mission.phase == 'climb', 20.0, target=None)
@@ -920,7 +944,7 @@ def test_abort_or_land_on_the_way_to_the_wall_stops_short_of_it(call, then):
     flight = _in_mode(Mode.APPROACH)
     flight.run_for(float(np.random.default_rng().uniform(0.5, 2.0)))
     out_m = _out_from_wall(flight)
-    assert out_m > flight.config.standoff_m + VEHICLE.tool_tip_x_m + 0.2
+    assert out_m > flight.config.contact.standoff_m + VEHICLE.tool_tip_x_m + 0.2
     ok, _ = getattr(flight.mission, call)()
     assert ok and flight.mission.mode == then
     nearest_m = out_m
@@ -1007,7 +1031,8 @@ def test_min_jerk_boundary_conditions():
 
 def test_inconsistent_timeouts_rejected():
     with pytest.raises(ConfigError, match='target_lost_retreat_s'):
-        Mission(VEHICLE, MissionConfig(target_lost_hold_s=2.0, target_lost_retreat_s=1.0))
+        Mission(VEHICLE, from_dict(MissionConfig, {'contact.target_lost_hold_s': 2.0,
+                                                   'contact.target_lost_retreat_s': 1.0}))
 
 
 def _touching_with_offset(cfg, offset_map, clearance_m=np.inf):
@@ -1046,7 +1071,7 @@ def test_the_touch_waits_for_the_tool_over_the_target(offset_m, pauses):
         assert not np.any(flight.log[-1][2].dlambda_d_t)
     else:
         assert flight.mission.phase == 'touch'
-        assert crept_m == pytest.approx(cfg.touch_speed_m_s * 1.0, rel=0.02)
+        assert crept_m == pytest.approx(cfg.contact.touch_speed_m_s * 1.0, rel=0.02)
     # the gust over, the creep goes on to the wall and the push
     flight._track = Flight._track.__get__(flight)
     flight.run_to(Mode.HOLD, timeout_s=30.0)
@@ -1061,9 +1086,9 @@ def test_a_gust_near_the_wall_backs_the_tool_out_while_the_touch_waits():
     assert flight.mission.phase == 'align'
     # the creep ran back out, at its own speed, to the clearance, and waits there untouched
     clearance = [entry[2].lambda_d_t[2] - VEHICLE.tool_tip_x_m for entry in flight.log[start:]]
-    assert np.max(np.diff(clearance)) <= cfg.touch_speed_m_s * DT_S + 1e-12
-    assert clearance[-1] == pytest.approx(cfg.touch_align_clearance_m,
-                                          abs=cfg.touch_speed_m_s * DT_S)
+    assert np.max(np.diff(clearance)) <= cfg.contact.touch_speed_m_s * DT_S + 1e-12
+    assert clearance[-1] == pytest.approx(cfg.contact.touch_align_clearance_m,
+                                          abs=cfg.contact.touch_speed_m_s * DT_S)
     gaps = [(entry[3] - P_POI) @ NORMAL - VEHICLE.tool_tip_x_m for entry in flight.log[start:]]
     assert min(gaps) > 0.0
     # the gust over, the creep goes on to the wall and the push
@@ -1076,18 +1101,18 @@ def test_a_wall_felt_while_the_tool_is_off_the_target_is_not_pressed_on():
     # swings the tip off the target then must not be pinned there by the press's friction
     cfg = MissionConfig()
     rng = np.random.default_rng()
-    off_m, angle = rng.uniform(1.5, 5.0) * cfg.touch_align_m, rng.uniform(0.0, 2 * np.pi)
+    off_m, angle = rng.uniform(1.5, 5.0) * cfg.contact.touch_align_m, rng.uniform(0.0, 2 * np.pi)
     flight = _touching_with_offset(cfg, off_m * np.array([0.0, np.cos(angle), np.sin(angle)]),
                                    clearance_m=0.0)
     flight.run_until(lambda f: f.mission.phase == 'align', 2.0)
-    felt_n = flight.mission._touch_threshold_n() + 0.5
-    for _ in range(3 * cfg.contact_detect_ticks):
+    felt_n = flight.mission.behaviours[Mode.CONTACT].touch_threshold_n() + 0.5
+    for _ in range(3 * cfg.contact.detect_ticks):
         flight.step(force_n=felt_n)
     assert flight.mission.phase == 'align'
     # the gust over, the tool is over the target: the same push now starts the press
     flight._track = Flight._track.__get__(flight)
     flight.run_until(lambda f: f.mission.phase == 'touch', 2.0)
-    for _ in range(cfg.contact_detect_ticks):
+    for _ in range(cfg.contact.detect_ticks):
         flight.step(force_n=felt_n)
     assert flight.mission.phase == 'press'
 
@@ -1102,13 +1127,14 @@ def _touch_s(cfg, offset_m):
 
 
 def test_the_touch_waits_no_longer_than_allowed():
-    cfg = MissionConfig(touch_align_wait_s=1.5)
+    cfg = from_dict(MissionConfig, {'contact.touch_align_wait_s': 1.5})
     # an offset that stays does not stall the touch: it costs the wait allowed, no more
     assert _touch_s(cfg, 0.02) - _touch_s(cfg, 0.0) == pytest.approx(1.5, abs=2 * DT_S)
 
 
 def test_the_touch_alignment_can_be_turned_off():
-    flight = _touching_with_offset(MissionConfig(touch_align_m=0.0), np.array([0.0, 0.0, 0.02]))
+    flight = _touching_with_offset(from_dict(MissionConfig, {'contact.touch_align_m': 0.0}),
+                                   np.array([0.0, 0.0, 0.02]))
     flight.run_until(lambda f: f.mission.phase == 'press', 30.0)
     assert 'align' not in flight.phases
 
@@ -1118,7 +1144,7 @@ def test_the_body_pitches_to_the_wall_at_the_pitch_rate_not_in_a_step():
     # swings with the reference, so the reference turns no faster than pitch_rate_rad_s
     rng = np.random.default_rng()
     lean, rate = rng.uniform(0.1, 0.45), rng.uniform(0.2, 1.0)
-    cfg = MissionConfig(pitch_rate_rad_s=rate)
+    cfg = from_dict(MissionConfig, {'flight.pitch_rate_rad_s': rate})
     normal = np.array([-np.cos(lean), 0.0, np.sin(lean)])
     flight = Flight(cfg, TargetEstimate(P_POI, normal, 0.02, True))
     assert flight.mission.inspect()[0]
@@ -1128,19 +1154,19 @@ def test_the_body_pitches_to_the_wall_at_the_pitch_rate_not_in_a_step():
     # and the tool points along the normal before the approach ends
     approach_end = max(i for i, (_, mode, _, _) in enumerate(flight.log)
                        if mode == Mode.APPROACH)
-    assert pitch[approach_end] == pytest.approx(lean, abs=cfg.arrive_yaw_tol_rad)
+    assert pitch[approach_end] == pytest.approx(lean, abs=cfg.flight.arrive_yaw_tol_rad)
 
 
 def test_the_tool_tip_meets_a_target_beyond_the_pitch_limit():
     # a wall leaning back further than the body may pitch: the tool stays 0.2 rad off the
     # normal, so the body stands off the normal (9 cm here) for the tool tip to meet the POI
-    cfg = MissionConfig(max_pitch_rad=0.3)
+    cfg = from_dict(MissionConfig, {'contact.max_pitch_rad': 0.3})
     normal = np.array([-np.cos(0.5), 0.0, np.sin(0.5)])
     flight = Flight(cfg, TargetEstimate(P_POI, normal, 0.02, True))
     assert flight.mission.inspect()[0]
     flight.run_to(Mode.HOLD, timeout_s=120.0)
     _, _, sp, p = flight.log[-1]
-    assert sp.pitch_rad == pytest.approx(cfg.max_pitch_rad)
+    assert sp.pitch_rad == pytest.approx(cfg.contact.max_pitch_rad)
     tip = p + VEHICLE.tool_tip_x_m * Rotation.from_euler(
         'ZY', [sp.yaw_rad, sp.pitch_rad]).apply([1.0, 0.0, 0.0])
     off = tip - P_POI
@@ -1149,3 +1175,35 @@ def test_the_tool_tip_meets_a_target_beyond_the_pitch_limit():
     assert 'align' not in flight.phases
     flight.run_until(lambda f: f.mission.mode == Mode.IDLE, 60.0)
     assert flight.mission.status['success']
+
+
+def test_the_retreat_lets_go_of_the_push_before_it_leaves_the_wall():
+    flight = _in_mode(Mode.HOLD)
+    cfg, tip = flight.config, VEHICLE.tool_tip_x_m
+    flight.run_to(Mode.RETREAT, timeout_s=2.0 * cfg.contact.hold_time_s)
+    assert flight.mission.phase == 'release'
+    start = len(flight.log)
+    flight.run_until(lambda f: f.mission.phase == '', 2.0 * cfg.contact.press_time_s)
+    release = [sp for _, _, sp, _ in flight.log[start - 1:]]
+    pushes = np.array([sp.push_n for sp in release])
+    # from the hold's push down to none, never up, over the press's time
+    assert pushes[0] == pytest.approx(flight.mission.contact_force_n, rel=1e-3)
+    assert np.all(np.diff(pushes) <= 1e-12) and pushes[-1] == 0.0
+    assert (len(release) - 1) * DT_S == pytest.approx(cfg.contact.press_time_s, abs=2 * DT_S)
+    # meanwhile the reference stays on the surface, compliant while it pushes
+    assert all(abs(sp.lambda_d_t[2] - tip) < 1e-3 for sp in release)
+    assert all(sp.contact_gains for sp in release if sp.push_n > 0.0)
+    flight.run_to(Mode.LAND, timeout_s=30.0)
+    assert flight.mission.records[0].success
+
+
+def test_a_failsafe_at_the_wall_lets_go_of_the_push_as_it_descends():
+    flight = _in_mode(Mode.HOLD)
+    cfg = flight.config
+    flight.run_for(1.0)
+    flight.step(odom_age_s=10.0 * cfg.failsafe.odom_stale_s)
+    assert flight.mission.mode == Mode.FAILSAFE_LAND
+    pushes = [flight.step(odom_age_s=10.0 * cfg.failsafe.odom_stale_s).push_n
+              for _ in range(int(round(cfg.contact.press_time_s / DT_S)) + 2)]
+    assert pushes[0] > 0.5 * flight.mission.contact_force_n
+    assert np.all(np.diff(pushes) <= 1e-12) and pushes[-1] == 0.0

@@ -2,14 +2,14 @@
 tracker): the vehicle is where the setpoint puts it, except that a flat wall stops the tool
 tip, and pushed against it with contact gains it measures the impedance spring K_z times the
 depth. Each touch's target is seen by vision (or never, where a test says so)."""
-import inspect
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from uav_tilt_control import mission as mission_module
-from uav_tilt_control.mission import MODES, MissionConfig, Mode
+from uav_tilt_common.config import from_dict
+from uav_tilt_control.mission import Mission, MissionConfig, Mode
+from uav_tilt_control.mission.base import ModeBehaviour
 from uav_tilt_control.plan import Slide, Touch
 from uav_tilt_control.target_estimator import TargetEstimate
 from test_mission import DT_S, VEHICLE, Flight, touch_ticks
@@ -36,7 +36,8 @@ class PlanFlight(Flight):
     def __init__(self, plan, config=None, unseen=(), yaw_error_rad=0.0, stuck=False):
         self.unseen, self.yaw_error_rad, self.stuck = set(unseen), yaw_error_rad, stuck
         self._stuck_p_map = None
-        super().__init__(config or MissionConfig(search_timeout_s=4.0), target=None, plan=plan,
+        super().__init__(config or from_dict(MissionConfig, {'search.timeout_s': 4.0}),
+                         target=None, plan=plan,
                          wall=(TARGETS['a'], NORMAL, np.inf))
 
     def seen(self):
@@ -89,10 +90,10 @@ def test_a_plan_runs_two_touches_and_a_slide_in_order():
     assert len(starts) == 2
     for k, task in zip(starts, plan[:2]):
         assert flight.phases[k - 1] == 'transit'
-        look = task.hint_map + NORMAL * flight.config.look_distance_m
-        np.testing.assert_allclose(flight.log[k][3], look, atol=flight.config.arrive_tol_m)
+        look = task.hint_map + NORMAL * flight.config.flight.look_distance_m
+        np.testing.assert_allclose(flight.log[k][3], look, atol=flight.config.flight.arrive_tol_m)
         x_tool = Rotation.from_quat(flight.attitudes[k]).apply([1.0, 0.0, 0.0])
-        assert x_tool @ -NORMAL > np.cos(flight.config.arrive_yaw_tol_rad)
+        assert x_tool @ -NORMAL > np.cos(flight.config.flight.arrive_yaw_tol_rad)
 
 
 @pytest.mark.parametrize('inclination_deg, hint_z_m',
@@ -109,7 +110,7 @@ def test_the_camera_looks_at_the_hint_when_the_search_starts(inclination_deg, hi
     flight.run_until(lambda f: f.mission.mode == Mode.SEARCH)
     p_map, q = flight.log[-1][3], flight.attitudes[-1]
     config = flight.config
-    assert p_map[2] >= config.ground_z_m + 2.0 * config.land_detect_height_m - 1e-9
+    assert p_map[2] >= config.land.ground_z_m + 2.0 * config.land.detect_height_m - 1e-9
     cam = VEHICLE.camera_in_base()
     R_map_base = Rotation.from_quat(q).as_matrix()
     ray_cam = (R_map_base @ cam.R).T @ (hint - (p_map + R_map_base @ cam.p))
@@ -142,7 +143,7 @@ def test_the_slide_follows_its_line_with_the_push_and_the_friction_feedforward()
     assert not any(sp.tangential_feedforward for _, mode, sp, _ in flight.log
                    if mode != Mode.SLIDE)
     # 1 m at 0.1 m/s, plus the speed-up and slow-down (each half as long at the cruise speed)
-    assert end - start == pytest.approx(1.0 / 0.1 + 1.875 * 0.1 / flight.config.slide_accel_m_s2,
+    assert end - start == pytest.approx(1.0 / 0.1 + 1.875 * 0.1 / flight.config.slide.accel_m_s2,
                                         abs=2 * DT_S)
 
 
@@ -187,7 +188,7 @@ def test_a_tool_tip_that_does_not_follow_the_line_fails_the_slide(line):
     # the reference's speed-up alone covers the tolerance (5 cm) within speed / accel + the
     # tolerance / speed (1.5 s); the line takes over 10 s
     cfg = flight.config
-    ahead_s = slide.speed_m_s / cfg.slide_accel_m_s2 + cfg.slide_path_tolerance_m / (
+    ahead_s = slide.speed_m_s / cfg.slide.accel_m_s2 + cfg.slide.path_tolerance_m / (
         slide.speed_m_s)
     assert sliding_s[-1] - sliding_s[0] <= ahead_s < slide.contact_s / 5
     assert records[1].success
@@ -199,7 +200,7 @@ def test_the_force_limit_ends_the_plan():
     flight = PlanFlight(_plan())
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.mission.mode == Mode.HOLD)
-    flight.step(force_n=flight.config.force_limit_n + 1.0)
+    flight.step(force_n=flight.config.failsafe.force_limit_n + 1.0)
     flight.run_until(lambda f: f.mission.mode == Mode.IDLE)
     records = flight.mission.records
     assert [(r.success, r.reason) for r in records] == [
@@ -233,32 +234,35 @@ def test_a_transit_that_meets_a_wall_backs_off_and_searches_from_there():
     flight.run_until(lambda f: f.mission.mode == Mode.SEARCH, 20.0)
     # searched from where it backed off, not from the look point
     np.testing.assert_allclose(flight.p - p0, push / np.linalg.norm(push)
-                               * cfg.free_flight_clearance_m, atol=cfg.arrive_tol_m)
+                               * cfg.bump.clearance_m, atol=cfg.flight.arrive_tol_m)
     flight.run_until(lambda f: f.mission.mode == Mode.IDLE)
     assert flight.mission.status['task_outcomes'] == 'ok,ok,ok'
 
 
 def test_a_transit_held_on_its_way_lands_and_ends_the_plan():
-    cfg = MissionConfig(arrive_timeout_s=float(np.random.default_rng().uniform(2.0, 20.0)))
+    cfg = from_dict(MissionConfig, {
+        'flight.arrive_timeout_s': float(np.random.default_rng().uniform(2.0, 20.0))})
     flight = PlanFlight(_plan(), cfg)
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.mission.phase == 'transit' and f.mission.task.target == 'b')
     flight._track = lambda sp: None       # something holds the vehicle where it is
-    segment = flight.mission._traj
-    flight.run_until(lambda f: f.mission.mode != Mode.HOVER, segment.T + cfg.arrive_timeout_s)
+    segment = flight.mission.reference.segment
+    flight.run_until(lambda f: f.mission.mode != Mode.HOVER,
+                     segment.T + cfg.flight.arrive_timeout_s)
     assert flight.mission.mode == Mode.LAND
-    assert flight.t_s == pytest.approx(segment.t0_s + segment.T + cfg.arrive_timeout_s,
+    assert flight.t_s == pytest.approx(segment.t0_s + segment.T + cfg.flight.arrive_timeout_s,
                                        abs=2 * DT_S)
     del flight._track
     flight.run_until(lambda f: f.mission.mode == Mode.IDLE, 30.0)
     assert [r.reason for r in flight.mission.records] == ['', 'unreachable', 'not_run']
 
 
-def test_every_mode_has_its_entry_and_tick_in_the_table():
-    assert set(MODES) == set(Mode)
-    assert all(callable(h.tick) and (h.enter is None or callable(h.enter))
-               for h in MODES.values())
-    assert "getattr(self, '_tick_'" not in inspect.getsource(mission_module)
+def test_every_mode_is_a_behaviour_of_its_own_with_its_own_tick():
+    behaviours = Mission(VEHICLE).behaviours
+    assert set(behaviours) == set(Mode)
+    assert all(b.mode == mode for mode, b in behaviours.items())
+    assert len({id(b) for b in behaviours.values()}) == len(Mode)
+    assert all(type(b).tick is not ModeBehaviour.tick for b in behaviours.values())
 
 
 def test_one_noisy_force_reading_is_not_the_wall():
@@ -266,6 +270,6 @@ def test_one_noisy_force_reading_is_not_the_wall():
     flight = PlanFlight(_plan())
     assert flight.mission.inspect()[0]
     flight.run_until(lambda f: f.mission.phase == 'close')
-    flight.step(force_n=flight.config.touch_threshold_n + 0.5)
+    flight.step(force_n=flight.config.contact.touch_threshold_n + 0.5)
     flight.run_until(lambda f: f.mission.phase != 'close')
     assert flight.mission.phase == 'touch'

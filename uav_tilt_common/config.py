@@ -125,7 +125,7 @@ def from_dict(cls: type[ConfigT], data: Mapping[str, Any] | None, prefix: str = 
     names = {f.name for f in dataclasses.fields(cls)}
     for key in data:
         if key not in names:
-            raise ConfigError(f"unknown parameter '{prefix}{key}'")
+            raise ConfigError(unknown_message(cls, key, prefix))
     kwargs = {}
     for f in dataclasses.fields(cls):
         name = prefix + f.name
@@ -137,6 +137,34 @@ def from_dict(cls: type[ConfigT], data: Mapping[str, Any] | None, prefix: str = 
         else:
             kwargs[f.name] = default
     return cls(**kwargs)
+
+
+def moved_to(cls: type, name: str) -> tuple[str, bool] | None:
+    """Where the dotted parameter ``name`` of config ``cls`` lives now, if it moved, and
+    whether that name is from the top-level config: a config class lists its renamed
+    parameters in a class attribute ``MOVED`` (old dotted name relative to the class -> the
+    new one, relative to the class or, after a '/', from the top-level config)."""
+    moved = getattr(cls, 'MOVED', {})
+    if name in moved:
+        new = moved[name]
+        return (new[1:], True) if new.startswith('/') else (new, False)
+    head, _, rest = name.partition('.')
+    group = next((_default_of(f) for f in dataclasses.fields(cls) if f.name == head), None) \
+        if rest and dataclasses.is_dataclass(cls) else None
+    inner = moved_to(type(group), rest) if _is_config(group) else None
+    if inner is None or inner[1]:
+        return inner
+    return head + '.' + inner[0], False
+
+
+def unknown_message(cls: type, name: str, prefix: str = '') -> str:
+    """The one line for a parameter ``prefix + name`` that config ``cls`` does not have:
+    where it lives now when it moved."""
+    moved = moved_to(cls, name)
+    if moved is None:
+        return f"unknown parameter '{prefix}{name}'"
+    new, absolute = moved
+    return f"parameter '{prefix}{name}' has moved: it is now '{new if absolute else prefix + new}'"
 
 
 def unit_of(name: str, meta: Mapping[str, Any]) -> str:

@@ -21,7 +21,7 @@ from rclpy.task import Future
 from uav_tilt_common import parent_watch
 from uav_tilt_common.node_entry import STOP_SIGNALS
 from uav_tilt_common.config import ConfigError, ConfigT, check_field, check_value, \
-    description, fields_flat, from_dict, read_yaml, replace_flat
+    description, fields_flat, from_dict, moved_to, read_yaml, replace_flat, unknown_message
 from uav_tilt_common.ros_spin import spin_events
 
 INT64 = (-2**63, 2**63 - 1)
@@ -62,7 +62,7 @@ def declare_config(node: Node, cls: type[ConfigT], dynamic: Iterable[str] = (),
     cfg = from_dict(cls, values)
     if dynamic:
         _watch_changes(node, cls, cfg, set(dynamic), on_change)
-    check_overrides(node)
+    check_overrides(node, cls)
     check_params_files(node, params_files(sys.argv))
     return cfg
 
@@ -140,19 +140,24 @@ def _plain(value):
     return list(value) if isinstance(value, (array.array, tuple)) else value
 
 
-def check_overrides(node: Node) -> None:
+def check_overrides(node: Node, cls: type | None = None) -> None:
     """ConfigError, one line, when a parameter given to the node (``-p``, a parameters file)
     is none it declares: rclpy would keep it unused, and a misspelt name would leave its
-    parameter at the default without a word."""
+    parameter at the default without a word. A parameter of config ``cls`` that moved is
+    named with its new place."""
     # rclpy has no public view of the overrides of parameters never declared
     given = getattr(node, '_parameter_overrides', {})
     unknown = sorted(name for name in given if not node.has_parameter(name))
-    if unknown:
-        close = difflib.get_close_matches(unknown[0], list(node._parameters), n=1)
-        hint = f" (did you mean '{close[0]}'?)" if close else ''
-        more = f', and {len(unknown) - 1} more' if len(unknown) > 1 else ''
-        raise ConfigError(f"unknown parameter '{unknown[0]}'{hint} of node "
-                          f"'{node.get_name()}'{more}")
+    if not unknown:
+        return
+    more = f', and {len(unknown) - 1} more' if len(unknown) > 1 else ''
+    if cls is not None and moved_to(cls, unknown[0]) is not None:
+        raise ConfigError(f"{unknown_message(cls, unknown[0])} (node '{node.get_name()}'"
+                          f"{more})")
+    close = difflib.get_close_matches(unknown[0], list(node._parameters), n=1)
+    hint = f" (did you mean '{close[0]}'?)" if close else ''
+    raise ConfigError(f"unknown parameter '{unknown[0]}'{hint} of node "
+                      f"'{node.get_name()}'{more}")
 
 
 def params_files(argv: list[str]) -> list[str]:

@@ -9,21 +9,29 @@ with the gyro.
 """
 import dataclasses
 import math
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError, nested, param
 from uav_tilt_common.geometry import quat_multiply, rotvec_to_quat
+from uav_tilt_common.planes import Plane
 from uav_tilt_common.state import ActuatorCommand, VehicleState
+from uav_tilt_common.targets import TargetCandidate
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control import frames
 from uav_tilt_control.flight_core import FlightCore, FlightCoreConfig
 from uav_tilt_control.mission import (DEFAULT_CONTACT_FORCE_N, NEAR_WALL, Mission,
                                       MissionConfig, Mode)
-from uav_tilt_control.plan import check_force, load_plan, one_touch_plan
+from uav_tilt_control.plan import (ForceRange, Task, Touch, check_force, load_plan,
+                                   one_touch_plan)
 from uav_tilt_control.site import SiteConfig
-from uav_tilt_control.target_estimator import TargetEstimator, TargetEstimatorConfig
+from uav_tilt_control.target_estimator import (TargetEstimate, TargetEstimator,
+                                               TargetEstimatorConfig)
+from uav_tilt_control.types import ImpedanceSetpoint
 
 TARGET_SOURCES = ('vision', 'ground_truth')
 __all__ = ['ControllerConfig', 'ControllerCore', 'SiteConfig', 'TARGET_SOURCES', 'plan_of']
@@ -32,13 +40,14 @@ __all__ = ['ControllerConfig', 'ControllerCore', 'SiteConfig', 'TARGET_SOURCES',
 @dataclasses.dataclass
 class ControllerConfig:
     """Controller parameters; the top-level names are DESIGN section 7's. ``autostart``
-    'inspect' runs the one-touch plan (``contact_force`` for mission.hold_time_s), 'plan'
+    'inspect' runs the one-touch plan (``contact_force`` for mission.contact.hold_time_s), 'plan'
     the plan in ``plan_file`` (uav_tilt_control.plan), validated against ``site``."""
 
     target_source: str = param('vision', choices=TARGET_SOURCES,
                                doc='where the target comes from (ground_truth: evaluation)')
-    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, lo=0.0, hi=20.0, unit='N',
-                                 doc='push along the surface normal during HOLD')
+    contact_force: float = param(DEFAULT_CONTACT_FORCE_N, unit='N',
+                                 doc='push along the surface normal during HOLD; one the '
+                                     'vehicle cannot make is refused with the range')
     autostart: str = param('', choices=('', 'inspect', 'plan'),
                            doc="mission started by itself (with odometry, and with the "
                                "target from vision once vision sends): 'inspect' the "
@@ -50,7 +59,7 @@ class ControllerConfig:
     site: SiteConfig = nested(SiteConfig)
 
 
-def force_range_n(cfg, vehicle):
+def force_range_n(cfg: ControllerConfig, vehicle: VehicleParams) -> ForceRange:
     """(low, high, what sets them): the open range of a push asked for (``contact_force``,
     a plan's ``force_n``) with ControllerConfig ``cfg`` on ``vehicle``. It must be felt as
     contact and stay under the force limit; and without contact feedforward the impedance
@@ -58,14 +67,14 @@ def force_range_n(cfg, vehicle):
     limited: a push beyond that is never reached."""
     m, impedance = cfg.mission, cfg.flight.impedance
     reach_n = vehicle.mass_kg * impedance.accel_limit_mps2
-    if not impedance.contact_feedforward and reach_n < m.force_limit_n:
-        return (m.contact_threshold_n, reach_n, 'mission.contact_threshold_n, the most the '
+    if not impedance.contact_feedforward and reach_n < m.failsafe.force_limit_n:
+        return (m.contact.threshold_n, reach_n, 'mission.contact.threshold_n, the most the '
                 'vehicle pushes: vehicle.mass_kg x flight.impedance.accel_limit_mps2')
-    return m.contact_threshold_n, m.force_limit_n, 'mission.contact_threshold_n, ' \
-        'mission.force_limit_n'
+    return m.contact.threshold_n, m.failsafe.force_limit_n, 'mission.contact.threshold_n, ' \
+        'mission.failsafe.force_limit_n'
 
 
-def plan_of(cfg, vehicle=None):
+def plan_of(cfg: ControllerConfig, vehicle: VehicleParams | None = None) -> list[Task]:
     """The tasks that ``inspect`` runs with ControllerConfig ``cfg`` on ``vehicle``
     (default VehicleParams()): the plan file's, validated against the site, or the one-touch
     inspection (ConfigError when bad)."""
@@ -78,34 +87,33 @@ def plan_of(cfg, vehicle=None):
     forces = force_range_n(cfg, vehicle or VehicleParams())
     if not cfg.plan_file:
         check_force("parameter 'contact_force'", cfg.contact_force, forces)
-        return one_touch_plan(cfg.site.check(), cfg.contact_force, m.hold_time_s)
+        return one_touch_plan(cfg.site.check(), cfg.contact_force, m.contact.hold_time_s)
     return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, forces,
-                     m.lowest_hover_m(), m.slide_path_tolerance_m)
+                     m.lowest_hover_m(), m.slide.path_tolerance_m)
 
 
 class ControllerCore:
     """Owns FlightCore, Mission and TargetEstimator; feed it messages, call :meth:`tick`."""
 
-    def __init__(self, vehicle: VehicleParams, config: ControllerConfig | None = None):
+    def __init__(self, vehicle: VehicleParams, config: ControllerConfig | None = None
+                 ) -> None:
         self.vehicle = vehicle
         self.config = config or ControllerConfig()
         cfg = self.config
         self.flight = FlightCore(vehicle, cfg.flight)
-        # The mission turns the wanted push into a depth with the impedance law's own K_z.
-        k_contact_z = self.flight.impedance.gains(contact=True)[0][2]
         self.estimator = TargetEstimator(cfg.estimator, vehicle.camera_in_base())
         self.estimator.hint_map = cfg.site.target_hint_map()
-        self.mission = Mission(vehicle, cfg.mission, cfg.contact_force, k_contact_z,
+        self.mission = Mission(vehicle, cfg.mission, cfg.contact_force,
                                drop_target=self.estimator.reset, plan=plan_of(cfg, vehicle),
                                on_task=self._on_task)
         self._odom: VehicleState | None = None
         self._R_map_base: np.ndarray | None = None  # of the odometry, on first use
         self._q_blind: np.ndarray | None = None
         # target id ('' = the target) -> (p_map, R_map_t)
-        self._ground_truths: dict[str, tuple] = {}
+        self._ground_truths: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         self._truth_id = ''         # the target of the task under way
         self._f_contact_map = np.zeros(3)
-        self._thrust_up_n = None       # the vertical thrust asked for on the tick before
+        self._thrust_up_n: float | None = None  # the vertical thrust asked for on the tick before
         self._autostarted = False
         self.autostart_held = False     # set by the node until a recorder listens
         # an autostart with the target from vision waits for vision's first frame: the
@@ -114,16 +122,16 @@ class ControllerCore:
         self._was_idle = True
         self.f_normal_n = 0.0
         # setpoint_hook(setpoint) -> setpoint: an outer loop's correction of the mission's
-        # setpoint before the impedance law (a learnt policy, uav_tilt_tools.gym_env)
-        self.setpoint_hook = None
+        # setpoint before the impedance law (a learnt policy, uav_tilt_tools.gym.env)
+        self.setpoint_hook: Callable[[ImpedanceSetpoint], ImpedanceSetpoint] | None = None
 
-    def _on_task(self, task):
+    def _on_task(self, task: Task) -> None:
         """A task starts: look for its target near where the plan says it is."""
         self._truth_id = task.target
-        if task.kind == 'touch':
+        if isinstance(task, Touch):
             self.estimator.aim(task.hint_map)
 
-    def plan_report(self):
+    def plan_report(self) -> dict[str, Any]:
         """The plan and how each task went, JSON-able (controller/plan): each task's
         description (uav_tilt_control.plan) with its TaskRecord, and the site's wall."""
         records = self.mission.records
@@ -142,21 +150,22 @@ class ControllerCore:
         """The last odometry taken, or None."""
         return self._odom
 
-    def on_odometry(self, state: VehicleState):
+    def on_odometry(self, state: VehicleState) -> None:
         """Mocap-like odometry (map -> base_link); also feeds the estimator's pose history."""
         self._odom = state
         self._R_map_base = None
         self._q_blind = np.asarray(state.q_map_base, dtype=float)
         self.estimator.add_state(state)
 
-    def on_wrench(self, force_ee, torque_ee):
+    def on_wrench(self, force_ee: ArrayLike, torque_ee: ArrayLike) -> None:
         """F/T reading at the tool (ee_link, FLU axes): the contact force on the vehicle."""
         force_ee = np.asarray(force_ee, dtype=float)
         if self._odom is None or not np.all(np.isfinite(force_ee)):
             return
         self._f_contact_map = self._odom_rotation() @ force_ee
 
-    def on_target_candidates(self, stamp_s, candidates):
+    def on_target_candidates(self, stamp_s: float,
+                             candidates: Sequence[TargetCandidate]) -> bool:
         """Vision's ``target/candidates`` of one frame (TargetCandidates in the camera
         optical frame, the tracked one first); returns True when one was accepted."""
         if self.config.target_source != 'vision':
@@ -165,7 +174,7 @@ class ControllerCore:
         return self.estimator.add_candidates(
             stamp_s, [(c.p_cam, c.n_cam, c.cov_cam) for c in candidates])
 
-    def on_planes(self, stamp_s, planes):
+    def on_planes(self, stamp_s: float, planes: Sequence[Plane]) -> int:
         """Vision's ``vision/planes`` of one frame (Planes in the camera optical frame):
         moved to map with the pose at the frame's stamp, for the mission's search; returns
         how many were moved (none without a pose at that stamp)."""
@@ -178,7 +187,8 @@ class ControllerCore:
                                        map_cam.rotate(plane.normal_cam), plane.share)
         return len(planes)
 
-    def on_ground_truth_target(self, p_map, q_map_t, target_id=''):
+    def on_ground_truth_target(self, p_map: ArrayLike, q_map_t: ArrayLike,
+                               target_id: str = '') -> bool:
         """Evaluation mode only: the true pose (map) of the target ``target_id`` ('' = the
         target of a one-touch inspection); ignored with vision."""
         if self.config.target_source != 'ground_truth':
@@ -192,29 +202,30 @@ class ControllerCore:
 
     # ---- services: each returns (ok, message) ----
 
-    def takeoff(self):
+    def takeoff(self) -> tuple[bool, str]:
         """Take off and hover."""
         return self.mission.takeoff()
 
-    def inspect(self):
+    def inspect(self) -> tuple[bool, str]:
         """Run the inspection mission."""
         return self.mission.inspect()
 
-    def abort(self):
+    def abort(self) -> tuple[bool, str]:
         """Leave the wall or stop and hover."""
         return self.mission.abort()
 
-    def land(self):
+    def land(self) -> tuple[bool, str]:
         """Land (retreating from the wall first)."""
         return self.mission.land()
 
-    def set_setpoint(self, p_map, yaw_rad):
+    def set_setpoint(self, p_map: ArrayLike, yaw_rad: float) -> tuple[bool, str]:
         """Move the hover point (map) and heading; HOVER only, non-finite rejected."""
         return self.mission.set_hover_setpoint(p_map, yaw_rad)
 
     # ---- the tick ----
 
-    def tick(self, t_s, gyro, dt_s, accel=None):
+    def tick(self, t_s: float, gyro: ArrayLike, dt_s: float, accel: ArrayLike | None = None
+             ) -> tuple[ActuatorCommand, dict[str, Any]]:
         """One control tick at IMU time ``t_s``; returns (ActuatorCommand, status dict).
 
         ``accel``: the IMU's specific force (base_link, m/s^2), for the disturbance observer.
@@ -243,7 +254,7 @@ class ControllerCore:
             self.flight.reset()
             self._was_idle = False
         stale = self.mission.mode == Mode.FAILSAFE_LAND and not (
-            odom_age_s <= self.config.mission.odom_stale_s)
+            odom_age_s <= self.config.mission.failsafe.odom_stale_s)
         if stale:
             state, setpoint = self._blind(t_s, setpoint, gyro, dt_s)
         else:
@@ -259,13 +270,15 @@ class ControllerCore:
 
     # ---- helpers ----
 
-    def _odom_rotation(self):
+    def _odom_rotation(self) -> NDArray[np.float64]:
         """R_map_base of the newest odometry; shared by the F/T intake and the tick."""
         if self._R_map_base is None:
+            # called only with odometry: the F/T intake and the tick return early without
+            assert self._odom is not None
             self._R_map_base = frames.quat_matrix(self._odom.q_map_base)
         return self._R_map_base
 
-    def _normal_force(self, target):
+    def _normal_force(self, target: TargetEstimate | None) -> float:
         """Push on the wall along -normal [N] (positive pushing), from the F/T reading: along
         the normal the mission works against near the wall, else the target's."""
         normal = self.mission.normal_map
@@ -277,9 +290,12 @@ class ControllerCore:
         x_tool_map = self._odom_rotation()[:, 0]
         return float(-self._f_contact_map @ x_tool_map)
 
-    def _blind(self, t_s, setpoint, gyro, dt_s):
+    def _blind(self, t_s: float, setpoint: ImpedanceSetpoint, gyro: NDArray[np.float64],
+               dt_s: float) -> tuple[VehicleState, ImpedanceSetpoint]:
         """(state, setpoint) for flying without odometry: only feed-forward acts, and never
         upwards, so the vehicle keeps descending until the ground stops it."""
+        # set with the odometry, and the tick flies blind only after it had odometry
+        assert self._q_blind is not None
         # not renormalised here: every consumer of the attitude normalises it
         self._q_blind = quat_multiply(self._q_blind, rotvec_to_quat(gyro * dt_s))
         p_map = setpoint.origin_map + setpoint.R_map_t @ setpoint.lambda_d_t
@@ -289,11 +305,11 @@ class ControllerCore:
         setpoint = dataclasses.replace(setpoint, ddlambda_d_t=setpoint.R_map_t.T @ a_map)
         return VehicleState(t_s, p_map, self._q_blind, v_map, gyro), setpoint
 
-    def _idle_command(self):
+    def _idle_command(self) -> ActuatorCommand:
         """Disarmed: rotors stopped, arms level."""
         return ActuatorCommand(np.zeros(4), 0.0, 0.0)
 
-    def _bounded(self, command):
+    def _bounded(self, command: ActuatorCommand) -> ActuatorCommand:
         thrusts = command.thrusts_n.tolist()
         if not all(map(math.isfinite, thrusts + [command.alpha_rad, command.beta_rad])):
             return self.flight.safe_command()
@@ -301,7 +317,8 @@ class ControllerCore:
         command.thrusts_n = np.array([min(max(f, 0.0), f_max) for f in thrusts])
         return command
 
-    def _status(self, t_s, odom_age_s, diagnostics, target):
+    def _status(self, t_s: float, odom_age_s: float, diagnostics: dict[str, Any],
+                target: TargetEstimate | None) -> dict[str, Any]:
         status = self.mission.status
         status.update(
             t_s=float(t_s),

@@ -16,10 +16,15 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.config import nested, param
 from uav_tilt_common.vehicle import GRAVITY
 from uav_tilt_control.lowpass import cutoff_tau_s, lowpass_weight
+from uav_tilt_control.types import ImpedanceSetpoint
+
+# (K, C): the stiffness and damping diagonals along (x_t, y_t, z_t)
+Gains = tuple[NDArray[np.float64], NDArray[np.float64]]
 
 
 @dataclasses.dataclass
@@ -33,7 +38,7 @@ class ImpedanceGains:
     k_n_m: list = param([10.0, 10.0, 10.0], lo=0.0, hi=1e4, length=3)
     c_n_s_m: list = param([7.2, 7.2, 7.2], lo=0.0, hi=1e4, length=3)
 
-    def k_c(self, mass_kg):
+    def k_c(self, mass_kg: float) -> Gains:
         """(K, C) diagonals for mass M: K = M wn^2, C = 2 zeta M wn in ``wn_zeta`` mode."""
         if self.mode == 'kc':
             return np.asarray(self.k_n_m, dtype=float), np.asarray(self.c_n_s_m, dtype=float)
@@ -69,9 +74,13 @@ class ImpedanceConfig:
     # Learn only when the vertical error is quasi-static: a moving error is a manoeuvre,
     # not a weight error (the integrator would wind up and overshoot).
     hover_estimator_speed_m_s: float = param(0.05, lo=0.0, hi=10.0)
+    # The push asked for (ImpedanceSetpoint.push_n) is trimmed by the measured one with this
+    # time constant while the setpoint says so (HOLD, SLIDE): a soft wall, which gives way,
+    # still gets the push; 0 disables the trim.
+    force_tau_s: float = param(0.5, lo=0.0, hi=60.0)
 
 
-def contact_depth_for_force(force_n, k_z_n_m):
+def contact_depth_for_force(force_n: float, k_z_n_m: float) -> float:
     """Depth [m] of the desired position behind the surface that pushes with ``force_n``.
 
     From eq. (6) at rest: K_z * e_z = F_c,z, so the push needs lambda_d,z = -F_d / K_z.
@@ -84,7 +93,7 @@ def contact_depth_for_force(force_n, k_z_n_m):
 class ImpedanceController:
     """Computes the thrust force F_p (map frame) from the impedance law in frame t."""
 
-    def __init__(self, mass_kg, config: ImpedanceConfig | None = None):
+    def __init__(self, mass_kg: float, config: ImpedanceConfig | None = None) -> None:
         self.mass_kg = float(mass_kg)
         self.config = config or ImpedanceConfig()
         # the configuration is fixed once built, so the gains are too
@@ -93,18 +102,24 @@ class ImpedanceController:
         self.f_contact_map = np.zeros(3)
         self.f_tangential_map = np.zeros(3)    # fed forward this tick (sliding)
         self.f_hover_n = 0.0       # learnt weight correction, map z
+        self.trim_n = 0.0          # the push's trim (force_tau_s), along -z_t
+        self._push_n = 0.0         # the push asked for on the tick before
 
-    def reset(self):
-        """Clear the contact-force filter and the hover-thrust estimate."""
+    def reset(self) -> None:
+        """Clear the contact-force filter, the push's trim and the hover-thrust estimate."""
         self.f_contact_map = np.zeros(3)
         self.f_tangential_map = np.zeros(3)
         self.f_hover_n = 0.0
+        self.trim_n = 0.0
+        self._push_n = 0.0
 
-    def gains(self, contact):
+    def gains(self, contact: bool) -> Gains:
         """(K, C) diagonals of the contact or free-flight set."""
         return self._gains[bool(contact)]
 
-    def update(self, p_map, v_map, setpoint, f_contact_map, dt_s, f_ext_map=None):
+    def update(self, p_map: ArrayLike, v_map: ArrayLike, setpoint: ImpedanceSetpoint,
+               f_contact_map: ArrayLike, dt_s: float,
+               f_ext_map: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """F_p in map [N] for the state (p, v in map) and an ``ImpedanceSetpoint``.
 
         ``f_contact_map`` is the measured contact force on the vehicle (map frame); it is
@@ -119,8 +134,9 @@ class ImpedanceController:
         R_map_t = np.asarray(setpoint.R_map_t, dtype=float)
         lambda_t = R_map_t.T @ (np.asarray(p_map, dtype=float) - setpoint.origin_map)
         dlambda_t = R_map_t.T @ np.asarray(v_map, dtype=float)   # the target is at rest
-        e_t = lambda_t - setpoint.lambda_d_t
-        de_t = dlambda_t - setpoint.dlambda_d_t
+        lambda_d_t, dlambda_d_t = self._pushed(setpoint, R_map_t, f_contact_map, dt_s)
+        e_t = lambda_t - lambda_d_t
+        de_t = dlambda_t - dlambda_d_t
         K, C = self.gains(setpoint.contact_gains)
         accel_t = np.asarray(setpoint.ddlambda_d_t, dtype=float) - (C * de_t + K * e_t) / (
             self.mass_kg)
@@ -143,7 +159,35 @@ class ImpedanceController:
             f_p_map -= f_ext_map
         return f_p_map
 
-    def _estimate_hover(self, e_map, de_map, K_t, contact, dt_s):
+    def _pushed(self, setpoint: ImpedanceSetpoint, R_map_t: NDArray[np.float64],
+                f_contact_map: ArrayLike, dt_s: float
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(lambda_d, dlambda_d) in frame t with the push: the reference the push's
+        depth behind it, push / K_z of the contact gains (eq. (6) at rest), the trim
+        included; the trim follows the measured push along z_t while the setpoint says so,
+        and is let go in proportion as the push is."""
+        k_z = self._gains[True][0][2]
+        push_n = float(setpoint.push_n)
+        tau = self.config.force_tau_s
+        if setpoint.trim_push:
+            if tau > 0.0:
+                f_n = float(np.asarray(f_contact_map, dtype=float) @ R_map_t[:, 2])
+                self.trim_n += (push_n - f_n) * dt_s / tau
+        elif push_n <= 0.0:
+            self.trim_n = 0.0
+        elif push_n < self._push_n:
+            self.trim_n *= push_n / self._push_n
+        self._push_n = push_n
+        lambda_d_t = np.asarray(setpoint.lambda_d_t, dtype=float)
+        dlambda_d_t = np.asarray(setpoint.dlambda_d_t, dtype=float)
+        if push_n == 0.0 and self.trim_n == 0.0 and setpoint.dpush_n_s == 0.0:
+            return lambda_d_t, dlambda_d_t
+        z_t = np.array([0.0, 0.0, 1.0])
+        return (lambda_d_t - contact_depth_for_force(push_n + self.trim_n, k_z) * z_t,
+                dlambda_d_t - contact_depth_for_force(float(setpoint.dpush_n_s), k_z) * z_t)
+
+    def _estimate_hover(self, e_map: NDArray[np.float64], de_map: NDArray[np.float64],
+                        K_t: NDArray[np.float64], contact: bool, dt_s: float) -> None:
         """Integrate the vertical error into the weight estimate (free flight only).
 
         Frozen in contact, where a vertical share of the push on an inclined wall must stay

@@ -14,13 +14,19 @@ push while the tool tip follows the polyline ``from_uv_m``, ``via_uv_m``..., ``t
 Every problem is one ConfigError line naming the task (index and kind) and the field.
 """
 import dataclasses
+import os
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from uav_tilt_common.config import ConfigError, from_dict, param, read_yaml
-from uav_tilt_control.site import HINT_ERROR_M
+from uav_tilt_common.targets import HINT_ERROR_M
+from uav_tilt_control.site import SiteConfig
 
 UV_RANGE_M = 1000.0
+# (low, high, what sets them): the open range a push must lie in, see check_force
+ForceRange = tuple[float, float, str]
 
 
 @dataclasses.dataclass
@@ -43,7 +49,7 @@ class SlideTask:
     speed_m_s: float = param(0.1, lo=0.005, hi=0.5)
     force_n: float = param(5.0)     # range: check_force, from the mission's config
 
-    def points_uv(self):
+    def points_uv(self) -> list[list[float]]:
         """The polyline's vertices, from first to last."""
         return [list(self.from_uv_m), *[list(p) for p in self.via_uv_m], list(self.to_uv_m)]
 
@@ -59,19 +65,19 @@ class Touch:
     site does not say)."""
 
     target: str
-    hint_map: np.ndarray
-    normal_map: np.ndarray
+    hint_map: np.ndarray | None
+    normal_map: np.ndarray | None
     force_n: float
     hold_s: float
     near_uv_m: list | None = None
     kind = 'touch'
 
     @property
-    def contact_s(self):
+    def contact_s(self) -> float:
         """How long the task pushes: its hold."""
         return self.hold_s
 
-    def describe(self):
+    def describe(self) -> dict[str, Any]:
         """JSON-able description (controller/plan)."""
         return dict(kind=self.kind, target=self.target, force_n=self.force_n,
                     hold_s=self.hold_s, near_uv_m=self.near_uv_m,
@@ -92,20 +98,24 @@ class Slide:
     target = ''
 
     @property
-    def length_m(self):
+    def length_m(self) -> float:
         """Length of the polyline."""
         return float(np.sum(np.linalg.norm(np.diff(self.points_map, axis=0), axis=1)))
 
     @property
-    def contact_s(self):
+    def contact_s(self) -> float:
         """How long the task pushes: the polyline at its speed."""
         return self.length_m / self.speed_m_s
 
-    def describe(self):
+    def describe(self) -> dict[str, Any]:
         """JSON-able description (controller/plan)."""
         return dict(kind=self.kind, target='', force_n=self.force_n, speed_m_s=self.speed_m_s,
                     points_uv=self.points_uv, points_map=_listed(self.points_map),
                     normal_map=_listed(self.normal_map), length_m=self.length_m)
+
+
+# a task of a plan, resolved for the mission
+Task = Touch | Slide
 
 
 class LineProgress:
@@ -123,14 +133,14 @@ class LineProgress:
     # control tick)
     WINDOW_M = 0.02
 
-    def __init__(self, vertices):
+    def __init__(self, vertices: ArrayLike) -> None:
         self._points = np.asarray(vertices, dtype=float)
         legs = np.linalg.norm(np.diff(self._points, axis=0), axis=1)
         self._starts = np.concatenate(([0.0], np.cumsum(legs)))
         self.length_m = float(self._starts[-1])
-        self.along_m = None     # before the first position
+        self.along_m: float | None = None     # before the first position
 
-    def update(self, p):
+    def update(self, p: ArrayLike) -> float:
         """Move the cursor for position ``p``; returns how far along the line it is [m]."""
         p = np.asarray(p, dtype=float)
         if self.along_m is None:
@@ -151,11 +161,11 @@ class LineProgress:
         return best_s
 
 
-def _listed(array):
+def _listed(array: ArrayLike | None) -> list[Any] | None:
     return None if array is None else np.asarray(array, dtype=float).tolist()
 
 
-def check_force(name, force_n, force_range_n):
+def check_force(name: str, force_n: float, force_range_n: ForceRange) -> None:
     """A push asked for must lie in the open range ``force_range_n`` = (low, high, what
     sets them): felt as contact, under the force limit and within what the vehicle pushes
     (uav_tilt_control.controller_core.force_range_n)."""
@@ -164,7 +174,7 @@ def check_force(name, force_n, force_range_n):
         raise ConfigError(f"{name} = {force_n!r} must be in ({low:g}, {high:g}) ({limits})")
 
 
-def one_touch_plan(site, force_n, hold_s):
+def one_touch_plan(site: SiteConfig, force_n: float, hold_s: float) -> list[Task]:
     """Today's inspection as a plan: one touch of the target, near the site's hint if any."""
     hint = site.target_hint_map()
     normal = site.normal_map() if hint is not None else None
@@ -172,7 +182,9 @@ def one_touch_plan(site, force_n, hold_s):
                   list(site.target_hint_uv_m) or None)]
 
 
-def load_plan(path, site, force_range_n, lowest_m=None, tolerance_m=None):
+def load_plan(path: str | os.PathLike[str], site: SiteConfig, force_range_n: ForceRange,
+              lowest_m: float | None = None,
+              tolerance_m: float | None = None) -> list[Task]:
     """Read, validate and resolve the plan file ``path`` (see the module docstring).
 
     ``site``: the SiteConfig the plan is checked against (target ids, wall extent);
@@ -193,7 +205,9 @@ def load_plan(path, site, force_range_n, lowest_m=None, tolerance_m=None):
         raise ConfigError(f"plan_file '{path}': {err}") from None
 
 
-def parse_plan(data, site, force_range_n, lowest_m=None, tolerance_m=None):
+def parse_plan(data: Any, site: SiteConfig, force_range_n: ForceRange,
+               lowest_m: float | None = None,
+               tolerance_m: float | None = None) -> list[Task]:
     """Validate and resolve plan ``data`` (as loaded from YAML); see :func:`load_plan`."""
     if not isinstance(data, dict) or set(data) != {'tasks'}:
         keys = sorted(map(str, data)) if isinstance(data, dict) else data
@@ -208,13 +222,14 @@ def parse_plan(data, site, force_range_n, lowest_m=None, tolerance_m=None):
             for i, entry in enumerate(entries)]
 
 
-def _resolve(i, entry, site, force_range_n, lowest_m, tolerance_m):
+def _resolve(i: int, entry: Any, site: SiteConfig, force_range_n: ForceRange,
+             lowest_m: float | None, tolerance_m: float | None) -> Task:
     where = f'tasks[{i}]'
     if not isinstance(entry, dict) or len(entry) != 1 or next(iter(entry)) not in KINDS:
         raise ConfigError(f"{where} = {entry!r} must be one of "
                           f"{', '.join(f'{{{k}: {{...}}}}' for k in KINDS)}")
     kind, body = next(iter(entry.items()))
-    task = from_dict(KINDS[kind], body, f'{where}.{kind}.')
+    task: TouchTask | SlideTask = from_dict(KINDS[kind], body, f'{where}.{kind}.')
     where = f'{where} ({kind})'
     for name in REQUIRED[kind]:
         if not getattr(task, name):
@@ -244,8 +259,8 @@ def _resolve(i, entry, site, force_range_n, lowest_m, tolerance_m):
             raise ConfigError(f"{where}: '{name}' = {uv!r} is at z = "
                               f"{site.point_map(uv)[2]:.2f} m, below {lowest_m - slack_m:g} m: "
                               f"the lowest the mission works at, {lowest_m:g} m "
-                              f"(mission.ground_z_m + 2 mission.land_detect_height_m){slack}")
-    if kind == 'touch':
+                              f"(mission.land.ground_z_m + 2 mission.land.detect_height_m){slack}")
+    if isinstance(task, TouchTask):
         if task.hold_s <= 0.0:
             raise ConfigError(f"{where}: 'hold_s' = {task.hold_s!r} must be more than 0: a "
                               f"touch is scored by its push over the hold")
@@ -270,11 +285,11 @@ def _resolve(i, entry, site, force_range_n, lowest_m, tolerance_m):
         # a tool tip that never moved would be within the tolerance of its end
         raise ConfigError(f"{where}: the line {points!r} is {slide.length_m:.3g} m long, no "
                           f"longer than the tolerance the slide is held to, {tolerance_m:g} m "
-                          f"(mission.slide_path_tolerance_m)")
+                          f"(mission.slide.path_tolerance_m)")
     return slide
 
 
-def _points_named(task):
+def _points_named(task: TouchTask | SlideTask) -> list[tuple[str, list[float]]]:
     if isinstance(task, TouchTask):
         return [('near_uv_m', list(task.near_uv_m))]
     return ([('from_uv_m', list(task.from_uv_m))]

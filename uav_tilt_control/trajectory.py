@@ -10,7 +10,10 @@ for another and lambda_d, dlambda_d and ddlambda_d stay consistent:
   and :class:`PolylineCruise`, one Cruise per leg of a polyline (at rest at each vertex):
   the tool tip sliding along the surface.
 """
+from typing import cast
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 # Shortest reference segment: bounds the accelerations of a segment that only has to
 # bring the reference velocity to rest.
@@ -29,6 +32,9 @@ BRAKE_ACCEL_M_S2 = 1.0
 BRAKE_PEAK = 3.9402
 BRAKE_REACH = 16.0 / 81.0
 
+# (p, v, a) of a segment at one time
+Pva = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
 
 class MinJerk:
     """Minimum jerk from (p0, v0, a0) to (p1, v=0, a=0) with peak speed about v_max.
@@ -42,29 +48,31 @@ class MinJerk:
     0.6 MIN_SEGMENT_S behind it at any rate of setpoints, instead of being braked for at
     every new one."""
 
-    def __init__(self, t0_s, p0, p1, v_max, v0=np.zeros(3), a0=np.zeros(3)):
+    def __init__(self, t0_s: float, p0: NDArray[np.float64], p1: ArrayLike, v_max: float,
+                 v0: ArrayLike = np.zeros(3), a0: ArrayLike = np.zeros(3)) -> None:
         self.t0_s = t0_s
         self.p1 = np.asarray(p1, dtype=float).copy()
         v0 = np.asarray(v0, dtype=float)
         d = self.p1 - p0
-        distance_m = np.linalg.norm(d)
+        # the norm of a float64 vector is a np.float64, so a float (numpy's stubs say floating)
+        distance_m = cast(float, np.linalg.norm(d))
         self.T = max(MIN_JERK_PEAK * distance_m / v_max, MIN_SEGMENT_S)
         T = self.T
         along = d / distance_m if distance_m > 0.0 else np.zeros(3)
         v_keep = along * float(np.clip(v0 @ along, 0.0, MIN_JERK_PEAK * distance_m / T))
         v_brake = v0 - v_keep
-        self.T_brake = min(max(BRAKE_PEAK * np.linalg.norm(v_brake) / BRAKE_ACCEL_M_S2,
-                               MIN_SEGMENT_S), T)
+        self.T_brake = min(max(BRAKE_PEAK * cast(float, np.linalg.norm(v_brake))
+                               / BRAKE_ACCEL_M_S2, MIN_SEGMENT_S), T)
         zero = np.zeros(3)
         self._c = np.array([p0, zero, zero, 10 * d / T ** 3, -15 * d / T ** 4,
                             6 * d / T ** 5], dtype=float) + _brake_quintic(v_keep, T)
         self._brake = _brake_quintic(v_brake, self.T_brake, np.asarray(a0, dtype=float))
 
-    def done(self, t_s):
+    def done(self, t_s: float) -> bool:
         """True once the segment has reached p1."""
         return t_s >= self.t0_s + self.T
 
-    def sample(self, t_s):
+    def sample(self, t_s: float) -> Pva:
         """(p, v, a) at ``t_s``; held at p1 after the end."""
         if self.done(t_s):
             return self.p1.copy(), np.zeros(3), np.zeros(3)
@@ -77,14 +85,15 @@ class MinJerk:
         return p, v, a
 
 
-def _brake_quintic(v0, T, a0=np.zeros(3)):
+def _brake_quintic(v0: NDArray[np.float64], T: float,
+                   a0: NDArray[np.float64] = np.zeros(3)) -> NDArray[np.float64]:
     """Coefficients of the quintic from (0, v0, a0) back to (0, 0, 0) over T."""
     return np.array([np.zeros(3), v0, a0 / 2, -6 * v0 / T ** 2 - 1.5 * a0 / T,
                      8 * v0 / T ** 3 + 1.5 * a0 / T ** 2, -3 * v0 / T ** 4 - 0.5 * a0 / T ** 3],
                     dtype=float)
 
 
-def _quintic_rows(t):
+def _quintic_rows(t: float) -> NDArray[np.float64]:
     """Rows d^k/dt^k (k = 0, 1, 2) of (1, t, ..., t^5): one product gives p, v and a."""
     t2 = t * t
     t3 = t2 * t
@@ -97,25 +106,26 @@ class Ramp:
     """Constant-velocity segment from p0 along ``velocity`` for at most ``duration`` s (the
     guarded move of a touch)."""
 
-    def __init__(self, t0_s, p0, velocity, duration):
+    def __init__(self, t0_s: float, p0: ArrayLike, velocity: ArrayLike,
+                 duration: float) -> None:
         self.t0_s = t0_s
         self.T = float(duration)
         self._p0 = np.asarray(p0, dtype=float).copy()
         self._v = np.asarray(velocity, dtype=float).copy()
         self.p1 = self._p0 + self._v * self.T
 
-    def done(self, t_s):
+    def done(self, t_s: float) -> bool:
         """True once the segment has run its full length."""
         return t_s >= self.t0_s + self.T
 
-    def sample(self, t_s):
+    def sample(self, t_s: float) -> Pva:
         """(p, v, a) at ``t_s``; held at the end point after the end."""
         if self.done(t_s):
             return self.p1.copy(), np.zeros(3), np.zeros(3)
         return self._p0 + self._v * max(t_s - self.t0_s, 0.0), self._v.copy(), np.zeros(3)
 
 
-def _smootherstep(x):
+def smootherstep(x: float) -> tuple[float, float]:
     """(s, ds/dx) of 10x^3 - 15x^4 + 6x^5 on [0, 1]: rises from 0 to 1 with zero first and
     second derivatives at both ends."""
     x2 = x * x
@@ -128,7 +138,8 @@ class Cruise:
     cruises, and comes down the same way. A leg too short to reach ``speed`` cruises at the
     highest speed it can reach."""
 
-    def __init__(self, t0_s, p0, p1, speed, accel):
+    def __init__(self, t0_s: float, p0: ArrayLike, p1: ArrayLike, speed: float,
+                 accel: float) -> None:
         self.t0_s = t0_s
         self._p0 = np.asarray(p0, dtype=float).copy()
         self.p1 = np.asarray(p1, dtype=float).copy()
@@ -142,26 +153,26 @@ class Cruise:
         cruise = self.length / speed - self._t_ramp if speed > 0.0 else 0.0
         self.T = 2.0 * self._t_ramp + max(cruise, 0.0)
 
-    def done(self, t_s):
+    def done(self, t_s: float) -> bool:
         """True once the leg has reached p1."""
         return t_s >= self.t0_s + self.T
 
-    def distance(self, t_s):
+    def distance(self, t_s: float) -> tuple[float, float, float]:
         """(s, ds/dt, d2s/dt2) along the leg at ``t_s``."""
         t = min(max(t_s - self.t0_s, 0.0), self.T)
         v, ramp = self.speed, self._t_ramp
         if ramp <= 0.0:
             return 0.0, 0.0, 0.0
         if t < ramp:
-            rise, slope = _smootherstep(t / ramp)
+            rise, slope = smootherstep(t / ramp)
             return v * ramp * _integral_smootherstep(t / ramp), v * rise, v * slope / ramp
         if t > self.T - ramp:
-            rise, slope = _smootherstep((self.T - t) / ramp)
+            rise, slope = smootherstep((self.T - t) / ramp)
             return (self.length - v * ramp * _integral_smootherstep((self.T - t) / ramp),
                     v * rise, -v * slope / ramp)
         return v * ramp / 2.0 + v * (t - ramp), v, 0.0
 
-    def sample(self, t_s):
+    def sample(self, t_s: float) -> Pva:
         """(p, v, a) at ``t_s``; held at p1 after the end."""
         if self.done(t_s):
             return self.p1.copy(), np.zeros(3), np.zeros(3)
@@ -169,7 +180,7 @@ class Cruise:
         return self._p0 + self._u * s, self._u * ds, self._u * dds
 
 
-def _integral_smootherstep(x):
+def _integral_smootherstep(x: float) -> float:
     """The integral of the smootherstep from 0 to x (1/2 at x = 1)."""
     x2 = x * x
     return x2 * x2 * (2.5 + x * (-3.0 + x))
@@ -179,10 +190,10 @@ class PolylineCruise:
     """A :class:`Cruise` along each leg of a polyline, one after the other, at rest at each
     vertex (a corner taken at speed would need an unbounded acceleration)."""
 
-    def __init__(self, t0_s, points, speed, accel):
+    def __init__(self, t0_s: float, points: ArrayLike, speed: float, accel: float) -> None:
         points = np.asarray(points, dtype=float)
         self.t0_s = t0_s
-        self.legs = []
+        self.legs: list[Cruise] = []
         t = t0_s
         for p0, p1 in zip(points[:-1], points[1:]):
             leg = Cruise(t, p0, p1, speed, accel)
@@ -192,23 +203,23 @@ class PolylineCruise:
         self.p1 = points[-1].copy()
         self.length = float(sum(leg.length for leg in self.legs))
 
-    def done(self, t_s):
+    def done(self, t_s: float) -> bool:
         """True once the last leg has ended."""
         return t_s >= self.t0_s + self.T
 
-    def _leg(self, t_s):
+    def _leg(self, t_s: float) -> Cruise:
         for leg in self.legs:
             if t_s < leg.t0_s + leg.T:
                 return leg
         return self.legs[-1]
 
-    def sample(self, t_s):
+    def sample(self, t_s: float) -> Pva:
         """(p, v, a) at ``t_s``; held at the last point after the end."""
         if self.done(t_s):
             return self.p1.copy(), np.zeros(3), np.zeros(3)
         return self._leg(t_s).sample(t_s)
 
-    def progress(self, t_s):
+    def progress(self, t_s: float) -> float:
         """Fraction of the polyline's length covered by the reference at ``t_s``."""
         if self.length <= 0.0 or self.done(t_s):
             return 1.0

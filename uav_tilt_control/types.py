@@ -18,6 +18,14 @@ class ImpedanceSetpoint:
     lambda_d_t: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
     dlambda_d_t: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
     ddlambda_d_t: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    # The push along -z_t wanted at rest, and its rate fed forward: the law holds its
+    # reference push_n / K_z (the contact K_z) behind lambda_d_t, eq. (6) at rest, so the
+    # mission speaks of forces and the law of springs.
+    push_n: float = 0.0
+    dpush_n_s: float = 0.0
+    # The measured push trims it (impedance.force_tau_s): a soft wall, which gives way,
+    # still gets push_n. While False the trim is let go with the push.
+    trim_push: bool = False
     yaw_rad: float = 0.0          # desired heading of x_FLU in map
     pitch_rad: float = 0.0        # held pitch (DESIGN section 2)
     contact_gains: bool = False   # True: the selective (contact) K, C; False: free flight
