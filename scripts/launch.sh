@@ -109,12 +109,12 @@ fi
 # The scenario is read here as well as by the plant, so that a missing or bad file is one
 # line and exit 2 before anything starts; its site (wall, target ids) is what --plan needs.
 if ((!vision_only)); then
-    site=$("$PY" -m uav_tilt_tools.site_params "$scenario") || { usage >&2; exit 2; }
+    site=$("$PY" -m uav_tilt_tools.runner.site_params "$scenario") || { usage >&2; exit 2; }
 fi
 # A folder that holds a bag (ours, or another tool's) is refused: it would be overwritten or
 # mixed, and the recorder would refuse it only once the graph is up.
 if [[ -n $record ]]; then
-    "$PY" -m uav_tilt_tools.mcap_bag "$record" || { usage >&2; exit 2; }
+    "$PY" -m uav_tilt_tools.bag.folder "$record" || { usage >&2; exit 2; }
 fi
 
 # CMD := the command of executable $1 (python module $2).
@@ -194,7 +194,7 @@ if ((vision_only)); then
     start vision
 fi
 if [[ -n $record ]]; then
-    resolve recorder_node uav_tilt_tools.recorder_node
+    resolve recorder_node uav_tilt_tools.bag.recorder_node
     ros_args recorder
     CMD+=(-p "output:=$record")
     start recorder
@@ -207,12 +207,12 @@ if [[ -n $record ]]; then
     done
 fi
 if [[ -n $mission ]]; then
-    CMD=("$PY" -m uav_tilt_tools.mission_watch)
+    CMD=("$PY" -m uav_tilt_tools.graph.mission_watch)
     ros_args mission_watch
     start mission_watch
 fi
 if ((foxglove)); then
-    resolve foxglove_bridge uav_tilt_tools.foxglove_bridge
+    resolve foxglove_bridge uav_tilt_tools.graph.foxglove_bridge
     ros_args foxglove
     [[ -z $scenario ]] || CMD+=(-p "scenario_file:=$scenario")
     start foxglove

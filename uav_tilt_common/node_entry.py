@@ -41,9 +41,9 @@ def vision():
 
 def recorder():
     """recorder_node."""
-    return _run('uav_tilt_tools.recorder_node')
+    return _run('uav_tilt_tools.bag.recorder_node')
 
 
 def foxglove():
     """foxglove_bridge."""
-    return _run('uav_tilt_tools.foxglove_bridge')
+    return _run('uav_tilt_tools.graph.foxglove_bridge')

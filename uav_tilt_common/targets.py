@@ -12,6 +12,10 @@ from typing import Iterable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+# A target hint (where a survey or a plan says the target is on its wall) is good to this
+# along each of the wall's axes (DESIGN section 5), so up to sqrt(2) times it away on the
+# diagonal: the controller takes hints to be this good, and random worlds make them so.
+HINT_ERROR_M = 0.3
 # The inspection objects a scenario places and the detector is trained on (class index =
 # position here); points of interest are defined for bolt plates.
 OBJECT_CLASSES = ('bolt_plate', 'gauge', 'hazard_sign')

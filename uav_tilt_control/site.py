@@ -1,15 +1,15 @@
 """What the controller knows of the site before it flies: the wall and its targets, as a
 drawing or a prior survey gives them (wall coordinates u right, v up, as in a scenario)."""
 import dataclasses
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.geometry import wall_point, wall_rotation
-
-# A target hint is good to this along each of the wall's axes (DESIGN section 5), so up to
-# sqrt(2) times it away on the diagonal.
-HINT_ERROR_M = 0.3
+from uav_tilt_common.targets import HINT_ERROR_M
 
 
 @dataclasses.dataclass
@@ -28,7 +28,7 @@ class SiteConfig:
     target_hint_uv_m: list = param([], lo=-1000.0, hi=1000.0, items=float)
     target_ids: list = param([], items=str)
 
-    def check(self):
+    def check(self) -> 'SiteConfig':
         """Cross-field checks (ConfigError); returns the site."""
         for name in ('wall_position_m', 'target_hint_uv_m'):
             value = getattr(self, name)
@@ -47,41 +47,41 @@ class SiteConfig:
         return self
 
     @property
-    def wall_known(self):
+    def wall_known(self) -> bool:
         """True when the wall's pose is surveyed."""
         return bool(self.wall_position_m)
 
     @property
-    def wall_size_known(self):
+    def wall_size_known(self) -> bool:
         """True when the wall's pose and its extent are surveyed."""
         return self.wall_known and self.wall_width_m > 0.0 and self.wall_height_m > 0.0
 
-    def point_map(self, uv_m):
+    def point_map(self, uv_m: Sequence[float]) -> NDArray[np.float64]:
         """Map point of wall coordinates (u, v) on the wall's surface."""
         return wall_point(self.wall_position_m, self.wall_yaw_deg, self.wall_inclination_deg,
                           *uv_m)
 
-    def rotation(self):
+    def rotation(self) -> NDArray[np.float64]:
         """R_map_wall: x along the wall (u), y up it (v), z its outward normal."""
         return wall_rotation(self.wall_yaw_deg, self.wall_inclination_deg)
 
-    def normal_map(self):
+    def normal_map(self) -> NDArray[np.float64]:
         """The wall's outward surface normal in map."""
         return self.rotation()[:, 2]
 
-    def on_wall(self, uv_m, margin_m=0.0):
+    def on_wall(self, uv_m: Sequence[float], margin_m: float = 0.0) -> bool:
         """True when (u, v) lies on the surveyed wall (edges included), or within
         ``margin_m`` of it."""
         u, v = uv_m
         return (abs(u) <= self.wall_width_m / 2.0 + margin_m
                 and -margin_m <= v <= self.wall_height_m + margin_m)
 
-    def target_hint_map(self):
+    def target_hint_map(self) -> NDArray[np.float64] | None:
         """The one-touch hint as a map point, or None without one."""
         self.check()
         return self.point_map(self.target_hint_uv_m) if self.target_hint_uv_m else None
 
-    def wall_frame(self):
+    def wall_frame(self) -> dict[str, list[Any]] | None:
         """{'origin_map', 'R_map_wall'} of the surveyed wall (lists), or None."""
         if not self.wall_known:
             return None

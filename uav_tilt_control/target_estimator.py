@@ -10,16 +10,19 @@ import collections
 import dataclasses
 import math
 import typing
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.config import param
 from uav_tilt_common.geometry import quat_slerp, quat_to_matrix
 from uav_tilt_common.pose import Pose
+from uav_tilt_common.state import VehicleState
 from uav_tilt_common.targets import is_no_target
 from uav_tilt_control import frames
 from uav_tilt_control.lowpass import lowpass_weight
-from uav_tilt_control.site import HINT_ERROR_M
+from uav_tilt_common.targets import HINT_ERROR_M
 
 # The first fix near a hint is taken within the hint's error on the diagonal plus this: the
 # vision estimate's own error (a few cm) and the POI's offset within the hinted object.
@@ -31,6 +34,9 @@ HINT_MARGIN_M = 0.03
 # from, or nearer, within gate_distance_m of it (no other object fits there), is a better
 # look at the same object: it refines even a locked estimate.
 REFINE_RANGE_RATIO = 0.5
+
+# A recorded vehicle state: (t_s, p_map, unit q_map_base)
+_State = tuple[float, NDArray[np.float64], NDArray[np.float64]]
 
 
 @dataclasses.dataclass
@@ -66,32 +72,36 @@ class TargetEstimate(typing.NamedTuple):
 class TargetEstimator:
     """Latency-compensated, gated and filtered POI position and surface normal in map."""
 
-    def __init__(self, config=None, camera_in_base=None):
+    def __init__(self, config: TargetEstimatorConfig | None = None,
+                 camera_in_base: Pose | None = None) -> None:
         """``camera_in_base``: the camera optical frame's :class:`Pose` in base_link
         (:meth:`VehicleParams.camera_in_base`; identity if None)."""
         self.config = config or TargetEstimatorConfig()
         self._camera_in_base = camera_in_base or Pose.identity()
-        self._history = collections.deque(maxlen=self.config.history_size)
-        self._p_map = None
-        self._P = None              # position covariance of the estimate, m^2
-        self._n_map = None
-        self._stamp_s = None        # stamp of the last accepted measurement
-        self._range_m = None        # the nearest range it was measured from (0: truth)
-        self._rejected_run = []     # consecutive gated-out measurements: (p_map, range_m)
+        self._history: collections.deque[_State] = collections.deque(
+            maxlen=self.config.history_size)
+        self._p_map: NDArray[np.float64] | None = None
+        self._P: NDArray[np.float64] | None = None  # position covariance of the estimate, m^2
+        self._n_map: NDArray[np.float64] | None = None
+        self._stamp_s: float | None = None  # stamp of the last accepted measurement
+        # the nearest range it was measured from (0: truth)
+        self._range_m: float | None = None
+        # consecutive gated-out measurements: (p_map, range_m)
+        self._rejected_run: list[tuple[NDArray[np.float64], float]] = []
         # Set by the mission: a locked target is never swapped for another object (a look-
         # alike); the first fix is taken near the hint (map) when there is one.
         self.locked = False
-        self.hint_map = None
+        self.hint_map: NDArray[np.float64] | None = None
         self.counters = dict(accepted=0, rejected_gate=0, rejected_nonfinite=0,
                              rejected_no_pose=0, rejected_hint=0, no_target=0, reacquired=0,
                              refined=0, switch_refused=0)
 
-    def reset(self):
+    def reset(self) -> None:
         """Forget the target estimate (a candidate the mission did not confirm)."""
         self._p_map = self._P = self._n_map = self._stamp_s = self._range_m = None
         self._rejected_run = []
 
-    def aim(self, hint_map):
+    def aim(self, hint_map: ArrayLike | None) -> None:
         """Look for the target near ``hint_map`` (map; None: wherever vision sees one): the
         estimate is kept only when it is within ``hint_radius_m`` of the new hint, else the
         next fix is taken near it (a plan's next target)."""
@@ -100,7 +110,7 @@ class TargetEstimator:
                 self._p_map - self.hint_map) > self.config.hint_radius_m:
             self.reset()
 
-    def add_state(self, state):
+    def add_state(self, state: VehicleState) -> None:
         """Record a vehicle state; out-of-order or non-finite states are ignored."""
         if self._history and state.t_s <= self._history[-1][0]:
             return
@@ -111,7 +121,7 @@ class TargetEstimator:
         # a unit quaternion: scipy's from_quat normalised it, the slerp needs it
         self._history.append((float(state.t_s), p_map, frames.unit(q)))
 
-    def pose_at(self, t_s):
+    def pose_at(self, t_s: float) -> Pose | None:
         """Vehicle :class:`Pose` in map at ``t_s``: linear position and slerp attitude
         between the bracketing states, or None outside the history."""
         if not self._history:
@@ -130,7 +140,8 @@ class TargetEstimator:
         u = (t_s - t0) / (t1 - t0)
         return Pose(quat_to_matrix(quat_slerp(q0, q1, u)), p0 + u * (p1 - p0))
 
-    def add_measurement(self, stamp_s, p_cam, n_cam_or_R_cam_t, covariance=None):
+    def add_measurement(self, stamp_s: float, p_cam: ArrayLike, n_cam_or_R_cam_t: ArrayLike,
+                        covariance: ArrayLike | None = None) -> bool:
         """Add a vision measurement in the camera optical frame, stamped with the image time.
 
         ``n_cam_or_R_cam_t`` is the surface normal (3,) or the target orientation (3x3,
@@ -146,7 +157,9 @@ class TargetEstimator:
             n_cam = n_cam[:, 2]
         return self.add_candidates(stamp_s, [(p_cam, n_cam, covariance)])
 
-    def add_candidates(self, stamp_s, candidates):
+    def add_candidates(self, stamp_s: float,
+                       candidates: Sequence[tuple[ArrayLike, ArrayLike, ArrayLike | None]]
+                       ) -> bool:
         """All target candidates of one frame, ``(p_cam, n_cam, covariance or None)`` each
         in the camera optical frame, vision's tracked one first; returns True when one was
         accepted.
@@ -193,7 +206,7 @@ class TargetEstimator:
             return True
         return self._update(stamp_s, in_map[k], n_map, R_meas, range_m)
 
-    def _nearer_the_hint(self, p_map):
+    def _nearer_the_hint(self, p_map: NDArray[np.float64]) -> bool:
         """Whether ``p_map``, unlocked, is another object than the estimate's (outside the
         gate), within the hint's radius and nearer the hint than the estimate by more than
         vision's error (HINT_MARGIN_M)."""
@@ -206,14 +219,16 @@ class TargetEstimator:
                     and distance_m < np.linalg.norm(self._p_map - hint) - HINT_MARGIN_M)
 
     @staticmethod
-    def _finite(stamp_s, p_cam, n_cam, cov):
+    def _finite(stamp_s: float, p_cam: ArrayLike, n_cam: ArrayLike,
+                cov: ArrayLike | None) -> bool:
         values = [np.asarray(p_cam, dtype=float), np.asarray(n_cam, dtype=float)]
         if cov is not None:
             values.append(np.asarray(cov, dtype=float).ravel())
         return bool(np.isfinite(stamp_s) and all(np.all(np.isfinite(v)) for v in values)
                     and np.linalg.norm(values[1]) > 1e-9)
 
-    def add_ground_truth(self, stamp_s, p_poi_map, n_map_or_R_map_t):
+    def add_ground_truth(self, stamp_s: float, p_poi_map: ArrayLike,
+                         n_map_or_R_map_t: ArrayLike) -> bool:
         """Evaluation mode: take a ground-truth target pose in map as the estimate."""
         n_map = np.asarray(n_map_or_R_map_t, dtype=float)
         if n_map.shape == (3, 3):
@@ -229,7 +244,7 @@ class TargetEstimator:
         self.counters['accepted'] += 1
         return True
 
-    def estimate(self, now_s=None):
+    def estimate(self, now_s: float | None = None) -> TargetEstimate | None:
         """TargetEstimate(p_poi_map, normal_map, age_s, valid) or None before the first fix.
 
         ``age_s`` is measured from the last accepted stamp to ``now_s`` (default: the newest
@@ -237,17 +252,20 @@ class TargetEstimator:
         """
         if self._p_map is None:
             return None
+        # _reset sets the estimate's parts together
+        assert self._n_map is not None and self._stamp_s is not None
         if now_s is None:
             now_s = self._history[-1][0] if self._history else self._stamp_s
         age_s = max(0.0, now_s - self._stamp_s)
         return TargetEstimate(self._p_map.copy(), self._n_map.copy(), age_s,
                               age_s <= self.config.valid_age_s)
 
-    def time_since_last_s(self, now_s):
+    def time_since_last_s(self, now_s: float) -> float:
         """Seconds since the last accepted measurement (inf before the first)."""
         return np.inf if self._stamp_s is None else now_s - self._stamp_s
 
-    def _meas_cov_map(self, cov, R_map_cam):
+    def _meas_cov_map(self, cov: NDArray[np.float64] | None,
+                      R_map_cam: NDArray[np.float64]) -> NDArray[np.float64]:
         if cov is None:
             return np.eye(3) * self.config.meas_std_m ** 2
         if cov.size == 36:
@@ -261,12 +279,16 @@ class TargetEstimator:
         floor = np.eye(3) * self.config.meas_std_m ** 2
         return R_map_cam @ cov_cam @ R_map_cam.T + floor
 
-    def _update(self, stamp_s, p_map, n_map, R_meas, range_m):
+    def _update(self, stamp_s: float, p_map: NDArray[np.float64], n_map: NDArray[np.float64],
+                R_meas: NDArray[np.float64], range_m: float) -> bool:
         cfg = self.config
         if self._p_map is None:
             self._reset(stamp_s, p_map, n_map, R_meas, range_m)
             self.counters['accepted'] += 1
             return True
+        # _reset sets the estimate's parts together
+        assert (self._P is not None and self._n_map is not None and self._stamp_s is not None
+                and self._range_m is not None)
         dt = max(0.0, stamp_s - self._stamp_s)
         P = self._P + np.eye(3) * cfg.process_std_m_sqrt_s ** 2 * dt
         r = p_map - self._p_map
@@ -288,10 +310,14 @@ class TargetEstimator:
         self.counters['accepted'] += 1
         return True
 
-    def _maybe_reacquire(self, stamp_s, p_map, n_map, R_meas, range_m):
+    def _maybe_reacquire(self, stamp_s: float, p_map: NDArray[np.float64],
+                         n_map: NDArray[np.float64], R_meas: NDArray[np.float64],
+                         range_m: float) -> None:
         # a run of rejected measurements that agree with each other means the estimate is
         # the outlier (wrong first lock, the target moved, or far looks): restart from them
         cfg, run = self.config, self._rejected_run
+        # only measurements gated against an estimate come here
+        assert self._p_map is not None and self._range_m is not None
         if run and np.linalg.norm(p_map - run[-1][0]) > cfg.gate_distance_m:
             run.clear()
         run.append((p_map, range_m))
@@ -309,7 +335,8 @@ class TargetEstimator:
             self._reset(stamp_s, p_map, n_map, R_meas, range_m)
             self.counters['refined' if refines else 'reacquired'] += 1
 
-    def _reset(self, stamp_s, p_map, n_map, P, range_m):
+    def _reset(self, stamp_s: float, p_map: NDArray[np.float64], n_map: NDArray[np.float64],
+               P: NDArray[np.float64], range_m: float) -> None:
         self._range_m = float(range_m)
         self._p_map = np.array(p_map, dtype=float)
         self._n_map = np.array(n_map, dtype=float)

@@ -1,35 +1,38 @@
 """The `uav-tilt` command line (DESIGN section 6).
 
 Each sub-command lives in its own module exposing ``register(subparsers)``, which adds
-its parser and sets ``func`` (args -> exit code).
+its parser and sets ``func`` (args -> exit code). This list is the only place that names
+them: nothing else imports a command module.
 """
 import argparse
 import importlib
 import signal
 import sys
+import types
 
 from uav_tilt_common.cli_args import INTERRUPTED
 
 COMMAND_MODULES = (
-    'uav_tilt_tools.bench',
-    'uav_tilt_tools.campaign',
-    'uav_tilt_tools.fly',
-    'uav_tilt_vision.vision_cli',
-    'uav_tilt_tools.report',
-    'uav_tilt_tools.topic_cli',
+    'uav_tilt_tools.commands.bench',
+    'uav_tilt_tools.commands.campaign',
+    'uav_tilt_tools.commands.fly',
+    'uav_tilt_vision.training.cli',
+    'uav_tilt_tools.commands.report',
+    'uav_tilt_tools.commands.topic',
 )
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every sub-command."""
-    parser = argparse.ArgumentParser(prog='uav-tilt', description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog='uav-tilt', description=__doc__.splitlines()[0]
+                                     if __doc__ else None)
     sub = parser.add_subparsers(dest='command', required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     """Entry point of `uav-tilt`. Ctrl-C, or SIGTERM (kill, timeout), ends a command with
     one line and exit code 130: what it started (worker processes, temporary folders, a
     graph) goes with it, which a process killed by the signal would leave behind."""
@@ -43,7 +46,7 @@ def main(argv=None):
         return INTERRUPTED
 
 
-def _interrupt(signum, frame):
+def _interrupt(signum: int, frame: types.FrameType | None) -> None:
     raise KeyboardInterrupt
 
 

@@ -1,0 +1,1 @@
+"""`uav-tilt bench`: speed and accuracy measurements, one JSON object each."""

@@ -1,0 +1,1 @@
+"""Campaigns: many randomised missions in-process, locally or on Ray, kept as they finish."""

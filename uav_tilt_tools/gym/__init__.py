@@ -1,0 +1,1 @@
+"""The Gymnasium environment of the touch on a wall (extra ``uav_tilt[gym]``)."""

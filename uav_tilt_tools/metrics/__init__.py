@@ -1,0 +1,1 @@
+"""The mission's and its tasks' metrics, shared by the report, the runner and the campaign."""

@@ -1,0 +1,229 @@
+"""Per-task results of a plan (summary.json ``tasks``), from the truth of a flight.
+
+One place for both the in-process summary (uav_tilt_tools.runner.inprocess) and the report
+of a recording (uav_tilt_tools.report.summary). Inputs are plain arrays on one time base:
+the tool tip (map) and the contact force on the vehicle (map), with the plan as
+``controller/plan`` carries it (each task's description and its TaskRecord: kind, success,
+reason, contact_lost, t_contact_s = [start, end] of HOLD or SLIDE, ...).
+
+- touch: over the hold, the tool tip's distance from the target's point of interest along
+  the surface (``poi_error_m``, ``poi_error_max_m``), the push's mean and RMS error against
+  the task's force; a touch the controller completed that misses the inspection bar
+  (:func:`missed_bar`) is no success, its reason the bar's;
+- slide: over the slide, the push's RMS error, the tool tip's distance from the requested
+  line in the wall's plane (``path_rms_error_m``, ``path_max_error_m``), the length of line
+  it covered, measured along the line as the mission measures it (``length_m``,
+  :class:`uav_tilt_control.plan.LineProgress`: a line that comes back on itself does not
+  fold), and the time it took (``duration_s``).
+
+The push is the contact force along the wall's outward normal (positive pushing).
+"""
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from uav_tilt_common.modes import Mode
+from uav_tilt_control import frames
+from uav_tilt_control.plan import LineProgress
+
+# The inspection bar (DESIGN section 7): over the hold, the true tool tip within 1 cm of the
+# point of interest along the surface, and the push within 0.1 N mean and 0.2 N RMS of the
+# task's force.
+POI_BAR_M = 0.01
+FORCE_MEAN_BAR_N = 0.1
+FORCE_RMS_BAR_N = 0.2
+# a target's truth: (POI in map, R_map_target)
+Truth = tuple[np.ndarray, np.ndarray]
+
+
+def task_results(tasks: Iterable[dict[str, Any]], t_s: npt.ArrayLike, tip_map: npt.ArrayLike,
+                 force_map: npt.ArrayLike, targets: dict[str, Truth] | None = None,
+                 wall_normal_map: npt.ArrayLike | None = None) -> list[dict[str, Any]]:
+    """One dict per task.
+
+    ``tasks``: controller/plan's task entries; ``t_s`` (N,), ``tip_map`` (N, 3),
+    ``force_map`` (N, 3): the truth on one time base; ``targets``: target id ('' = the
+    first target) -> (poi_map, R_map_target) of the truth; ``wall_normal_map``: the true
+    outward normal of the wall (None: the plan's, i.e. the site's).
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    tip_map = np.asarray(tip_map, dtype=float).reshape(-1, 3)
+    force_map = np.asarray(force_map, dtype=float).reshape(-1, 3)
+    out = []
+    for task in tasks:
+        entry = dict(index=task.get('index'), kind=task['kind'],
+                     success=task.get('success') is True, reason=task.get('reason') or '',
+                     contact_lost=int(task.get('contact_lost') or 0),
+                     force_setpoint_n=task.get('force_n'))
+        mask = pushing(task, t_s)
+        if task['kind'] == 'touch':
+            entry.update(target=task.get('target', ''),
+                         **_touch(task, t_s[mask], tip_map[mask], force_map[mask],
+                                  (targets or {}).get(task.get('target', '')), wall_normal_map))
+            missed = entry['success'] and missed_bar(entry)
+            if missed:
+                # completed by the controller, yet off the bar by the truth (a push that
+                # fell short of its force, a press on a look-alike)
+                entry.update(success=False, reason=missed)
+        else:
+            normal = _normal(task, wall_normal_map)
+            entry.update(_slide(task, t_s[mask], tip_map[mask], force_map[mask] @ normal,
+                                normal))
+        out.append(entry)
+    return out
+
+
+def missed_bar(task: dict[str, Any]) -> str | None:
+    """Why a touch the controller completed misses the inspection bar by the truth:
+    'off_target' (the tool tip pressed elsewhere, such as on a look-alike) or
+    'force_off_setpoint'; None when it meets it, or where there is nothing to judge (a
+    slide, a touch without ground truth)."""
+    if task['kind'] != 'touch':
+        return None
+    if task['poi_error_max_m'] is not None and task['poi_error_max_m'] > POI_BAR_M:
+        return 'off_target'
+    mean_n, rms_n = task['force_mean_n'], task['force_rms_error_n']
+    if mean_n is not None and (abs(mean_n - task['force_setpoint_n']) > FORCE_MEAN_BAR_N
+                               or rms_n > FORCE_RMS_BAR_N):
+        return 'force_off_setpoint'
+    return None
+
+
+def first_missed_bar(tasks: Iterable[dict[str, Any]] | None) -> str | None:
+    """The :func:`missed_bar` reason of the first of ``tasks`` that misses the bar, or None."""
+    return next((m for m in map(missed_bar, tasks or ()) if m), None)
+
+
+def failure_of(result: dict[str, Any]) -> dict[str, Any] | None:
+    """Why a run missed the inspection bar, as {'reason', 'mode', 'phase'}, or None when it
+    met it: the failsafe that ended it (the controller's last failsafe reason: a task's
+    failure writes one too) and where it fired, else what kept it from
+    completing; for a run the controller completed, the first touch that the truth puts
+    off the bar (:func:`missed_bar`, in HOLD)."""
+    if result['success']:
+        missed = first_missed_bar(result.get('tasks'))
+        return {'reason': missed, 'mode': Mode.HOLD.value, 'phase': ''} if missed else None
+    reason = result.get('failsafe_reason')
+    where = result.get('failsafe_where') or {}
+    failed = [t for t in result.get('tasks', ()) if not t['success'] and t['reason']]
+    if not reason and failed:
+        mode = Mode.HOLD if failed[0]['kind'] == 'touch' else Mode.SLIDE
+        reason, where = failed[0]['reason'], {'mode': mode.value, 'phase': ''}
+    if not reason:
+        if result.get('contact_lost'):
+            reason = 'contact_lost'
+            where = {'mode': Mode.HOLD.value, 'phase': ''}
+        else:
+            last = result['mode_history'][-1][1] if result.get('mode_history') else 'none'
+            reason, where = 'not_completed', {'mode': last, 'phase': ''}
+    return {'reason': reason, 'mode': where.get('mode'), 'phase': where.get('phase')}
+
+
+# A recording's stamps are whole nanoseconds, a task record's times the controller's own
+# floats: a sample within this of a bound is the sample at it (ticks are 3.3 ms apart).
+STAMP_TOLERANCE_S = 1e-6
+
+
+def pushing(task: dict[str, Any], t_s: np.ndarray) -> np.ndarray:
+    """Samples of the task's HOLD or SLIDE: start <= t < end (the end of the data while it
+    had not ended), to STAMP_TOLERANCE_S."""
+    window = task.get('t_contact_s')
+    if not window or window[0] is None:
+        return np.zeros(t_s.shape, dtype=bool)
+    end = np.inf if window[1] is None else window[1]
+    return (t_s >= window[0] - STAMP_TOLERANCE_S) & (t_s < end - STAMP_TOLERANCE_S)
+
+
+def _normal(task: dict[str, Any], wall_normal_map: npt.ArrayLike | None) -> np.ndarray:
+    normal = wall_normal_map if wall_normal_map is not None else task.get('normal_map')
+    return frames.unit(normal if normal is not None else [0.0, 0.0, 1.0])
+
+
+def _force_stats(push: np.ndarray, force_n: float) -> dict[str, float | None]:
+    if not len(push):
+        return dict(force_mean_n=None, force_rms_error_n=None)
+    return dict(force_mean_n=float(push.mean()),
+                force_rms_error_n=float(np.sqrt(np.mean((push - force_n) ** 2))))
+
+
+def _touch(task: dict[str, Any], t_s: np.ndarray, tips: np.ndarray, forces: np.ndarray,
+           truth: Truth | None, wall_normal_map: npt.ArrayLike | None) -> dict[str, Any]:
+    out = dict(poi_error_m=None, poi_error_max_m=None, hold_time_s=0.0, hold_tip_map=None,
+               **_force_stats(np.zeros(0), 0.0))
+    if truth is not None:
+        normal = truth[1][:, 2]
+    else:
+        normal = _normal(task, wall_normal_map)
+    if not len(t_s):
+        return out
+    out.update(_force_stats(forces @ normal, task['force_n']),
+               hold_time_s=float(t_s[-1] - t_s[0]),
+               hold_tip_map=tips.mean(axis=0).tolist())
+    if truth is not None:
+        # along the surface: a wall that gives way lets the tip sink in along the normal
+        offsets = tips - truth[0]
+        errors = np.linalg.norm(offsets - np.outer(offsets @ normal, normal), axis=1)
+        out.update(poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()))
+    return out
+
+
+def slide_geometry(task: dict[str, Any], tips: npt.ArrayLike, normal: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(distance from the line in the wall's plane, how far along the line the tips have
+    come (:class:`LineProgress`), tips in wall coordinates (u, v)) of each tool tip (N, 3)
+    of slide ``task``, in their order."""
+    points = np.asarray(task['points_map'], dtype=float)
+    flat = np.eye(3) - np.outer(normal, normal)
+    # the line's own frame: x along the wall (horizontal), y up it, as the wall's (u, v)
+    R, origin = frames.target_frame_from_normal(points[0], normal)
+    uv0 = np.asarray(task.get('points_uv') or [[0.0, 0.0]], dtype=float)[0]
+    tips = np.asarray(tips, dtype=float).reshape(-1, 3)
+    distance = np.full(len(tips), np.inf)
+    for a, b in zip(points[:-1], points[1:]):
+        d = flat @ (b - a)
+        rel = (tips - a) @ flat
+        u = np.clip(rel @ d / (d @ d), 0.0, 1.0)
+        distance = np.minimum(distance, np.linalg.norm(rel - np.outer(u, d), axis=1))
+    progress = LineProgress(points @ flat)
+    along = np.array([progress.update(tip) for tip in tips @ flat])
+    uv = uv0 + ((tips - origin) @ R)[:, :2]
+    return distance, along, uv
+
+
+def line_uv(task: dict[str, Any], normal: np.ndarray) -> np.ndarray:
+    """The requested line's vertices in the wall coordinates of :func:`slide_geometry`."""
+    points = np.asarray(task['points_map'], dtype=float)
+    return slide_geometry(task, points, normal)[2]
+
+
+def _slide(task: dict[str, Any], t_s: np.ndarray, tips: np.ndarray, push: np.ndarray,
+           normal: np.ndarray) -> dict[str, Any]:
+    out = dict(path_rms_error_m=None, path_max_error_m=None, length_m=0.0, duration_s=0.0,
+               line_length_m=task.get('length_m'), **_force_stats(push, task['force_n']))
+    if not len(t_s):
+        return out
+    distance, along, _ = slide_geometry(task, tips, normal)
+    out.update(path_rms_error_m=float(np.sqrt(np.mean(distance ** 2))),
+               path_max_error_m=float(distance.max()),
+               length_m=float(along[-1] - along[0]), duration_s=float(t_s[-1] - t_s[0]))
+    return out
+
+
+# The first touch's keys that summary.json also has at its top level (metrics.mission).
+FIRST_TOUCH_KEYS = ('poi_error_m', 'poi_error_max_m', 'force_setpoint_n', 'force_mean_n',
+                    'force_rms_error_n', 'hold_time_s', 'hold_tip_map')
+
+
+def with_tasks(summary: dict[str, Any], tasks: Sequence[dict[str, Any]] | None
+               ) -> dict[str, Any]:
+    """``summary`` (a :mod:`metrics.mission` summary) with the plan's ``tasks`` (None: no plan
+    recorded) and, for a plan of more than one task, its touch keys from the first touch
+    alone: over every HOLD they would mix targets and setpoints. Returns ``summary``."""
+    summary['tasks'] = tasks
+    if tasks and len(tasks) > 1:
+        touches = [task for task in tasks if task['kind'] == 'touch']
+        for key in FIRST_TOUCH_KEYS:
+            if key in summary:
+                summary[key] = touches[0].get(key) if touches else None
+    return summary

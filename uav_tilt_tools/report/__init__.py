@@ -1,0 +1,1 @@
+"""`uav-tilt report`: summary.json and plots of a recorded run."""

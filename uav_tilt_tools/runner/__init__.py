@@ -1,0 +1,1 @@
+"""One mission in-process: the plant and controller cores stepped together, no ROS."""

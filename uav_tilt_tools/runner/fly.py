@@ -1,0 +1,108 @@
+"""One inspection mission (or plan) in-process, its summary as ``uav-tilt fly`` prints it.
+
+The same cores as the node graph (:mod:`uav_tilt_tools.runner.inprocess`), with the target
+from the deployed detector on the rendered camera (``target_source='vision'``) or from
+ground truth. The summary holds the ``summary.json`` keys (DESIGN section 7) plus
+``failure`` (why a failed run failed, and in which mode and phase), ``mode_history`` and
+``tasks`` (one entry per task of the plan): how a user checks a world of their own in a
+minute, and what the campaign runs for each draw.
+"""
+import time
+from typing import TYPE_CHECKING, Any, Iterable
+
+import numpy as np
+
+from uav_tilt_common.config import from_dict
+from uav_tilt_control.controller_core import ControllerConfig, plan_of
+from uav_tilt_control.mission import MissionConfig
+from uav_tilt_sim.plant import Plant, PlantCoreConfig
+from uav_tilt_sim.scenario import Scenario
+from uav_tilt_tools.bag.flight_bag import FlightBag
+from uav_tilt_tools.bag.folder import recording_folder
+from uav_tilt_tools.metrics.tasks import failure_of
+from uav_tilt_tools.runner.inprocess import run_mission
+from uav_tilt_tools.runner.site_params import site_overrides
+
+if TYPE_CHECKING:     # the vision stack (torch) is imported only for a flight with vision
+    from uav_tilt_tools.runner.camera_vision import CameraVision
+
+# a whole search (mission.search.timeout_s) and an inspection after it
+DURATION_S = 210.0
+
+
+def default_duration_s(plan: Iterable[Any]) -> float:
+    """The simulated time a plan's flight is allowed: DURATION_S a task, plus the time its
+    tasks push beyond the default touch's hold (a long hold, a long or slow slide)."""
+    hold_s = MissionConfig().contact.hold_time_s
+    return sum(DURATION_S + max(0.0, task.contact_s - hold_s) for task in plan)
+
+
+def fly(scenario: Scenario, target_source: str = 'vision',
+        overrides: dict[str, Any] | None = None, duration_s: float | None = None,
+        model_path: str = '', threads: int = 0, record: str | None = None) -> dict[str, Any]:
+    """Fly the inspection mission of ``scenario`` (the plan in ``overrides['plan_file']``
+    when given) for at most ``duration_s`` (default :func:`default_duration_s`); returns the
+    summary dict.
+
+    ``threads``: the detector's (and OpenCV's) thread pool, 0 = the libraries' defaults;
+    ``record``: a folder to write the flight to as the recorder writes a run
+    (:mod:`uav_tilt_tools.bag.flight_bag`: recording.mcap and rosbag2's metadata.yaml;
+    FileExistsError when it holds a recording, :func:`bag.folder.recording_folder`).
+    """
+    values = {'target_source': target_source, **(overrides or {})}
+    config = from_dict(ControllerConfig, values)
+    if duration_s is None:
+        duration_s = default_duration_s(plan_of(config))
+    plant_config = PlantCoreConfig()
+    vision: CameraVision | None = None
+    if target_source == 'vision':
+        # the vision stack (torch) only for a flight that has vision in the loop
+        from uav_tilt_tools.runner.camera_vision import camera_vision
+        vision = camera_vision(plant_config, model_path, threads=threads)
+    bag = None
+    if record is not None:
+        bag = FlightBag(recording_folder(record), config, plant_config.camera, vision,
+                        own_folder=True)
+    start = time.perf_counter()
+    try:
+        result = run_mission(scenario, config, duration_s=duration_s,
+                             plant_config=plant_config, vision=vision, recorder=bag)
+        wall_s = time.perf_counter() - start    # of the flight, not of the file's closing
+    finally:
+        if bag is not None:
+            bag.close()
+    # the keys of a node graph's summary.json, on this process's wall clock
+    result.update(rtf=result['sim_time_s'] / wall_s,
+                  controller_rate_hz=result['ticks'] / wall_s, vision_fps=None,
+                  vision_latency_ms_p95=None)
+    if vision is not None:
+        result['vision_fps'] = vision.frames / wall_s
+        if vision.latency_ms:
+            result['vision_latency_ms_p95'] = float(np.percentile(vision.latency_ms, 95))
+    result['failure'] = failure_of(result)
+    return result
+
+
+def check_plan(scenario: Scenario, plan_file: str, overrides: dict[str, Any] | None = None
+               ) -> dict[str, Any]:
+    """Validate ``plan_file`` against the site of ``scenario`` (ConfigError when bad);
+    returns the controller overrides that fly it: the scenario's site, where ``overrides``
+    (the user's) do not say otherwise."""
+    overrides = {**site_overrides(scenario), **(overrides or {}), 'plan_file': plan_file}
+    plan_of(from_dict(ControllerConfig, overrides))
+    return overrides
+
+
+def check_world(scenario: Scenario) -> None:
+    """ConfigError when ``scenario``'s world cannot be flown: it is built once, as the plant
+    builds it (a start in the wall is refused there)."""
+    Plant(PlantCoreConfig(), scenario).close()
+
+
+def jsonable(value: Any) -> Any:
+    """``json.dumps`` default for numpy values."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f'{type(value).__name__} is not JSON serialisable')

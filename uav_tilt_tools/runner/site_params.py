@@ -1,0 +1,56 @@
+"""The controller's site from a scenario, as a survey would give it: the wall and its
+target ids (uav_tilt_control.site.SiteConfig).
+
+``python -m uav_tilt_tools.runner.site_params [SCENARIO]`` prints them as ROS arguments, one word
+a line (``-p``, ``site.wall_yaw_deg:=0.0``, ...), for scripts/launch.sh; an empty SCENARIO
+is the default scenario. A bad scenario prints one line on stderr and exits 2.
+"""
+import sys
+from typing import Any, Sequence
+
+from uav_tilt_common.config import ConfigError
+from uav_tilt_sim.scenario import Scenario, load_scenario, target_ids
+
+
+def site_overrides(scenario: Scenario, hint_uv_m: Sequence[float] | None = None
+                   ) -> dict[str, Any]:
+    """Controller parameters that give it the scenario's wall and target ids as a survey
+    would, and the hint (u, v on that wall) when there is one."""
+    wall = scenario.wall
+    out: dict[str, Any] = {'site.wall_position_m': [float(v) for v in wall.position_m],
+                           'site.wall_yaw_deg': float(wall.yaw_deg),
+                           'site.wall_inclination_deg': float(wall.inclination_deg),
+                           'site.wall_width_m': float(wall.width_m),
+                           'site.wall_height_m': float(wall.height_m),
+                           'site.target_ids': target_ids(scenario)}
+    if hint_uv_m is not None:
+        out['site.target_hint_uv_m'] = [float(v) for v in hint_uv_m]
+    return out
+
+
+def ros_arguments(overrides: dict[str, Any]) -> list[str]:
+    """``-p name:=value`` words of parameter overrides (strings quoted, so that an id such
+    as ``y`` stays a string; an empty list, which has no type, left out)."""
+    words = []
+    for name, value in overrides.items():
+        if isinstance(value, list) and not value:
+            continue
+        text = repr(value) if isinstance(value, (list, str)) else str(value)
+        words += ['-p', f'{name}:={text}']
+    return words
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the site parameters of the scenario file in ``argv`` (see the docstring)."""
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        scenario = load_scenario(argv[0] if argv and argv[0] else None)
+    except (OSError, ConfigError) as err:
+        print(f'site_params: {err}', file=sys.stderr)
+        return 2
+    print('\n'.join(ros_arguments(site_overrides(scenario))))
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
