@@ -18,11 +18,18 @@ import multiprocessing
 import os
 import signal
 import time
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
 from multiprocessing.shared_memory import SharedMemory
+from multiprocessing.synchronize import Semaphore
+from typing import Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
+from uav_tilt_sim.camera import CameraConfig
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
+from uav_tilt_sim.scenario import Scenario
 
 START_TIMEOUT_S = 60.0
 # How often the camera process checks that the plant is still there, and how long a frame
@@ -35,14 +42,17 @@ STATE_FLOATS = 9        # Plant.render_state
 _STOP = np.nan          # a state whose first float is this ends the camera process
 
 
-def core_config(config):
+def core_config(config: PlantCoreConfig) -> PlantCoreConfig:
     """The :class:`PlantCoreConfig` part of a config that extends it (the node's)."""
     return PlantCoreConfig(**{f.name: getattr(config, f.name)
                               for f in dataclasses.fields(PlantCoreConfig)})
 
 
-def _buffers(buf, cam):
-    """(state, rgb, depth) arrays laid out in ``buf``."""
+def _buffers(shm: SharedMemory, cam: CameraConfig
+             ) -> tuple[NDArray[np.float64], NDArray[np.uint8], NDArray[np.float32]]:
+    """(state, rgb, depth) arrays laid out in ``shm``."""
+    buf = shm.buf
+    assert buf is not None      # None only once closed
     state = np.ndarray(STATE_FLOATS, np.float64, buf)
     shape = (cam.height, cam.width)
     rgb = np.ndarray((*shape, 3), np.uint8, buf, offset=state.nbytes)
@@ -50,7 +60,7 @@ def _buffers(buf, cam):
     return state, rgb, depth
 
 
-def _shared_bytes(cam):
+def _shared_bytes(cam: CameraConfig) -> int:
     return STATE_FLOATS * 8 + cam.height * cam.width * (3 + 4)
 
 
@@ -61,19 +71,21 @@ class CameraProcess:
     when the process does not come up; :meth:`frame` raises it when the process has ended.
     """
 
-    def __init__(self, config, scenario, start_timeout_s=START_TIMEOUT_S):
+    def __init__(self, config: PlantCoreConfig, scenario: Scenario,
+                 start_timeout_s: float = START_TIMEOUT_S) -> None:
         context = multiprocessing.get_context('spawn')   # the parent runs DDS threads
         self._shm = SharedMemory(create=True, size=_shared_bytes(config.camera))
-        self._state, self._rgb, self._depth = _buffers(self._shm.buf, config.camera)
+        self._state, self._rgb, self._depth = _buffers(self._shm, config.camera)
         self._asked, self._drawn = context.Semaphore(0), context.Semaphore(0)
         conn, child = context.Pipe(duplex=False)
-        self._process = context.Process(
+        self._process: BaseProcess | None = context.Process(
             target=_serve, args=(child, self._asked, self._drawn, core_config(config),
                                  scenario, self._shm.name, os.getpid()),
             name='uav_tilt camera', daemon=True)
         self._process.start()
         child.close()
-        self._pending = None        # (t_s, when asked) of the frame being drawn
+        # (t_s, when asked) of the frame being drawn
+        self._pending: tuple[float, float] | None = None
         try:
             if not conn.poll(start_timeout_s):
                 raise RuntimeError(f'the camera process did not start within '
@@ -88,10 +100,11 @@ class CameraProcess:
         finally:
             conn.close()
 
-    def _ended(self):
-        return f'the camera process ended (exit code {self._process.exitcode})'
+    def _ended(self) -> str:
+        exitcode = None if self._process is None else self._process.exitcode
+        return f'the camera process ended (exit code {exitcode})'
 
-    def request(self, t_s, render_state):
+    def request(self, t_s: float, render_state: Sequence[float]) -> bool:
         """Ask for the frame at ``render_state`` (:meth:`Plant.render_state`), stamped
         ``t_s``; False, and nothing asked, while the last frame is still being drawn."""
         if self._pending is not None:
@@ -101,19 +114,19 @@ class CameraProcess:
         self._asked.release()
         return True
 
-    def frame(self):
+    def frame(self) -> tuple[float, NDArray[np.uint8], NDArray[np.float32]] | None:
         """(t_s, rgb, depth) of the frame asked for, once drawn (copies), else None."""
         if self._pending is None:
             return None
         if not self._drawn.acquire(block=False):
             if (time.monotonic() - self._pending[1] > ALIVE_CHECK_S
-                    and not self._process.is_alive()):
+                    and not (self._process is not None and self._process.is_alive())):
                 raise RuntimeError(self._ended())
             return None
         t_s, self._pending = self._pending[0], None
         return t_s, self._rgb.copy(), self._depth.copy()
 
-    def close(self):
+    def close(self) -> None:
         """End the process and release the shared memory."""
         if self._process is None:
             return
@@ -129,7 +142,7 @@ class CameraProcess:
         self._shm.unlink()
 
 
-def _below_the_plant():
+def _below_the_plant() -> None:
     """Lower a SCHED_FIFO priority inherited from the plant (see PRIORITY_BELOW_PLANT)."""
     try:
         if os.sched_getscheduler(0) == os.SCHED_FIFO:
@@ -140,15 +153,16 @@ def _below_the_plant():
         pass                        # left as it was: lowering is all this is for
 
 
-def _serve(conn, asked, drawn, config, scenario, shm_name, parent_pid):
+def _serve(conn: Connection, asked: Semaphore, drawn: Semaphore, config: PlantCoreConfig,
+           scenario: Scenario, shm_name: str, parent_pid: int) -> None:
     """The child: a plant of the same scenario that only renders, one frame a request, until
     the parent asks it to stop or is gone."""
     # the terminal's Ctrl-C reaches the whole process group: stopping is the parent's
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _below_the_plant()
     shm = SharedMemory(name=shm_name)     # the parent's resource tracker unlinks it
-    state, rgb_out, depth_out = _buffers(shm.buf, config.camera)
-    warnings = []
+    state, rgb_out, depth_out = _buffers(shm, config.camera)
+    warnings: list[str] = []
     plant = Plant(config, scenario, warn=warnings.append)
     try:
         plant.start_renderer()

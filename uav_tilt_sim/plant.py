@@ -87,7 +87,7 @@ class Plant:
                                           np.radians(scenario.start_yaw_deg),
                                           mm.mass_scale, mm.inertia_scale, self.scene)
         self._warn = warn
-        self.renderer = None        # made on the first render
+        self.renderer: cam_mod.Renderer | None = None   # made on the first render
         self.body = ids.body
         self.mass_kg = self.vehicle.mass_kg * mm.mass_scale
         # Resting on its skid when the start height is at or below the ground.
@@ -217,7 +217,7 @@ class Plant:
         rel = self._wind_mean_map + self._gust - vel_map
         return self.scenario.wind.drag_n_s2_per_m2 * math.sqrt(rel @ rel) * rel
 
-    def _tilts(self):
+    def _tilts(self) -> tuple[float, float]:
         states = p.getJointStates(self.body, self._arm_joints, physicsClientId=self.client)
         return states[0][0], states[1][0]
 
@@ -316,15 +316,16 @@ class Plant:
             p.resetJointState(self.body, joint, angle, 0.0, physicsClientId=self.client)
         self._truth = None
 
-    def start_renderer(self):
+    def start_renderer(self) -> cam_mod.Renderer:
         """Make the renderer (a GL context) now rather than at the first frame."""
         if self.renderer is None:
             self.renderer = cam_mod.make_renderer(self.config.camera, self._warn)
+        return self.renderer
 
     def render(self, lighting=None, segmentation=False):
         """Render the eye-in-hand camera: (rgb, depth_m, seg)."""
-        self.start_renderer()
+        renderer = self.start_renderer()
         p_cam, R_map_cam = self.camera_pose()
-        rgb, depth, seg = cam_mod.render_with(self.renderer, self.scene, p_cam, R_map_cam,
+        rgb, depth, seg = cam_mod.render_with(renderer, self.scene, p_cam, R_map_cam,
                                               lighting, segmentation)
         return rgb, self.sensors.depth(depth), seg

@@ -96,7 +96,7 @@ def _regular_polygon(centre_px, radius_px, n, angle_rad):
 
 
 def _bolt_plate(rng, s):
-    base = np.float32([190, 190, 192]) + rng.uniform(-15, 15, 3).astype(np.float32)
+    base = np.array([190, 190, 192], np.float32) + rng.uniform(-15, 15, 3).astype(np.float32)
     # Brushed metal: noise stretched along the rows.
     streaks = cv2.resize(rng.normal(0, 1, (s, max(s // 32, 2))).astype(np.float32), (s, s),
                          interpolation=cv2.INTER_LINEAR)
@@ -125,7 +125,7 @@ def _gauge(rng, s):
     img += 10.0 * _fractal_noise(rng, (s, s))[..., None]
     centre = _uv_to_px((0.5, 0.5), s)
     _circle(img, centre, 0.47 * s, (35, 35, 40))
-    face = np.float32([245, 245, 240]) - rng.uniform(0, 20, 3).astype(np.float32)
+    face = np.array([245, 245, 240], np.float32) - rng.uniform(0, 20, 3).astype(np.float32)
     _circle(img, centre, 0.40 * s, face)
     for k in range(11):
         a = np.deg2rad(135.0 + 27.0 * k)
@@ -145,10 +145,10 @@ def _gauge(rng, s):
 
 
 def _hazard_sign(rng, s):
-    backing = np.float32([235, 235, 235]) - rng.uniform(0, 30, 3).astype(np.float32)
+    backing = np.array([235, 235, 235], np.float32) - rng.uniform(0, 30, 3).astype(np.float32)
     img = np.ones((s, s, 3), np.float32) * backing
     img += 6.0 * _fractal_noise(rng, (s, s))[..., None]
-    yellow = np.float32([250, 205, 20]) + rng.uniform(-15, 5, 3).astype(np.float32)
+    yellow = np.array([250, 205, 20], np.float32) + rng.uniform(-15, 5, 3).astype(np.float32)
     black = (20.0, 20.0, 20.0)
     tilt = rng.uniform(-0.05, 0.05)
     outer = _regular_polygon((s / 2.0, 0.56 * s), 0.50 * s, 3, -np.pi / 2 + tilt)
@@ -184,7 +184,7 @@ def _concrete(rng, s):
 
 def _bricks(rng, s):
     mortar = _random_colour(rng, 150, 220)
-    brick = np.float32([rng.uniform(120, 190), rng.uniform(40, 90), rng.uniform(30, 70)])
+    brick = np.array([rng.uniform(120, 190), rng.uniform(40, 90), rng.uniform(30, 70)], np.float32)
     img = np.ones((s, s, 3), np.float32) * mortar
     rows = int(rng.integers(6, 12))
     bh = s / rows
@@ -255,7 +255,7 @@ def _gravel(rng, s):
 
 
 def _grass(rng, s):
-    green = np.float32([rng.uniform(40, 90), rng.uniform(80, 140), rng.uniform(20, 60)])
+    green = np.array([rng.uniform(40, 90), rng.uniform(80, 140), rng.uniform(20, 60)], np.float32)
     img = green * (1.0 + 0.35 * _fractal_noise(rng, (s, s), octaves=6)[..., None])
     blades = cv2.resize(rng.normal(0, 1, (s // 4, s)).astype(np.float32), (s, s))
     return img + 12.0 * blades[..., None]

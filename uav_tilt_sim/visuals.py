@@ -2,7 +2,7 @@
 
 A :class:`Visual` (a textured rectangle, a box, a cylinder or a sphere in a link frame) makes
 both the PyBullet visual shape that TinyRenderer draws and the triangle mesh that the GL
-renderer (:mod:`uav_tilt_sim.gl_renderer`) draws. A :class:`Scene` lists the visuals of
+renderer (:mod:`uav_tilt_sim.camera.gl`) draws. A :class:`Scene` lists the visuals of
 every body of one physics client by (body, link); the builders of the world, the vehicle
 and the data set fill it as they create bodies.
 """

@@ -95,8 +95,10 @@ class FrameDetector(Protocol):
 class VisionPipeline:
     """Stateful per-frame processing; ``detector.predict(rgb) -> (N, 6)`` or None (no model)."""
 
-    def __init__(self, detector: FrameDetector | None, intrinsics: CameraIntrinsics,
+    def __init__(self, detector: FrameDetector | None, intrinsics: CameraIntrinsics | None,
                  config: VisionConfig | None = None) -> None:
+        """``intrinsics`` may be None until they are known (the node's first camera_info);
+        :meth:`process` needs them."""
         self.detector = detector
         self.intrinsics = intrinsics
         self.config = config or VisionConfig()
@@ -148,7 +150,7 @@ class VisionPipeline:
             return
         self._since_planes = 0
         with _timer(res, 'planes'):
-            res.planes = find_planes(depth_m, self.intrinsics, self.config.planes)
+            res.planes = find_planes(depth_m, self._camera(), self.config.planes)
 
     def _pose_in(self, rgb: NDArray[np.uint8], depth_m: NDArray[np.floating[Any]],
                  box: NDArray[np.float64], res: FrameResult, tracked: bool
@@ -162,8 +164,14 @@ class VisionPipeline:
         if tracked:
             res.poi_px = poi[:2]
         with _timer(res, 'pose'):
-            return estimate_target_pose(poi[0], poi[1], depth_m, self.intrinsics,
+            return estimate_target_pose(poi[0], poi[1], depth_m, self._camera(),
                                         self.config.pose_window_px, self.config.pixel_sigma_px)
+
+    def _camera(self) -> CameraIntrinsics:
+        """The intrinsics; a frame before them is the caller's error (the node drops those)."""
+        if self.intrinsics is None:
+            raise ValueError('no camera intrinsics yet')
+        return self.intrinsics
 
     def _track(self, gray: np.ndarray, res: FrameResult) -> NDArray[np.float64] | None:
         """The tracked box, or None when lost or of too low quality (then: re-detect)."""

@@ -104,7 +104,7 @@ def pose_msg(result: FrameResult, stamp: Any) -> PoseWithCovarianceStamped:
 class VisionNode(Node):
     """Thin shell: camera messages -> VisionPipeline -> target/pose, debug image, status."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__('vision', parameter_overrides=[Parameter('use_sim_time', value=True)])
         self.cfg = declare_config(self, VisionNodeConfig, DYNAMIC)
         detector, note = open_detector(self.cfg.model_path, self.cfg.backend)
@@ -132,11 +132,14 @@ class VisionNode(Node):
         sub(self, Image, names.CAMERA_COLOR, lambda m: self.on_image('color', m), q, raw=True)
         sub(self, Image, names.CAMERA_DEPTH, lambda m: self.on_image('depth', m), q, raw=True)
         sub(self, CameraInfo, names.CAMERA_INFO, self.on_camera_info, q)
-        self.latest = {'color': None, 'depth': None}   # (msg, wall arrival time)
+        # (msg, wall arrival time)
+        self.latest: dict[str, tuple[cdr.CdrImage, float] | None] = \
+            {'color': None, 'depth': None}
         self.rejects = RejectCounter()
         self.frames_without_info = 0
         self.counts = dict(frames_received=0, frames_processed=0, targets_found=0)
-        self.window = collections.deque(maxlen=STATS_WINDOW)  # (latency_s, FrameResult)
+        self.window: collections.deque[tuple[float, FrameResult]] = \
+            collections.deque(maxlen=STATS_WINDOW)
         self.last_status = (time.monotonic(), 0)
         # Wall clock: status keeps coming when sim time stalls (the plant is gone).
         self.create_timer(1.0 / self.cfg.status_rate_hz, self.on_status,
@@ -145,11 +148,11 @@ class VisionNode(Node):
                                f'detect_every={self.cfg.detect_every}')
 
     # --- inputs -------------------------------------------------------------------------
-    def _reject(self, reason, detail):
+    def _reject(self, reason: str, detail: str) -> None:
         if self.rejects.reject(reason):
             self.get_logger().warn(f'rejected {detail}; {self.rejects.total} rejected so far')
 
-    def on_camera_info(self, msg):
+    def on_camera_info(self, msg: CameraInfo) -> None:
         """Intrinsics of the frames that follow."""
         k = np.asarray(msg.k, dtype=float)
         if not (np.all(np.isfinite(k)) and k[0] > 0 and k[4] > 0 and msg.width > 0
@@ -159,7 +162,7 @@ class VisionNode(Node):
         self.pipeline.intrinsics = CameraIntrinsics(k[0], k[4], k[2], k[5], int(msg.width),
                                                     int(msg.height))
 
-    def on_image(self, kind, data):
+    def on_image(self, kind: str, data: bytes) -> None:
         """Keep the newest colour and depth (serialized); a pair with equal stamps is
         processed."""
         now = time.monotonic()
@@ -177,7 +180,8 @@ class VisionNode(Node):
         self.process(color[0], depth[0], min(color[1], depth[1]))
 
     # --- processing ---------------------------------------------------------------------
-    def process(self, color_msg, depth_msg, arrival):
+    def process(self, color_msg: cdr.CdrImage, depth_msg: cdr.CdrImage, arrival: float
+                ) -> None:
         """Validate, run the pipeline, publish target/pose (and the debug image)."""
         if self.pipeline.intrinsics is None:
             self.frames_without_info += 1
@@ -212,7 +216,7 @@ class VisionNode(Node):
         self.counts['targets_found'] += int(result.found)
         self.window.append((latency_s, result))
 
-    def on_status(self):
+    def on_status(self) -> None:
         """vision/status: rates, latency from image arrival to publish, shares, rejections."""
         now = time.monotonic()
         last_wall, last_count = self.last_status

@@ -15,9 +15,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.geometry import quat_to_matrix
 from uav_tilt_sim.bullet import pybullet as p
+from uav_tilt_sim.camera.types import CameraConfig, Frame, Lighting
 
 if TYPE_CHECKING:
-    from uav_tilt_sim.camera import CameraConfig, Frame, Lighting
     from uav_tilt_sim.visuals import Scene, Visual
 
 _VERTEX = """
@@ -79,7 +79,7 @@ class GlRenderer:
     Raises RuntimeError (with the reason) when no OpenGL 3.3 context can be made.
     """
 
-    def __init__(self, cam: 'CameraConfig') -> None:
+    def __init__(self, cam: CameraConfig) -> None:
         # llvmpipe rasterises in the calling thread: on two cores its worker threads only
         # add hand-overs (measured: 2.5 ms a frame with none, 4 ms with its default two)
         os.environ.setdefault('LP_NUM_THREADS', '0')
@@ -159,7 +159,7 @@ class GlRenderer:
         return out
 
     def render(self, scene: 'Scene', p_cam_map: ArrayLike, R_map_cam: ArrayLike,
-               lighting: 'Lighting', segmentation: bool = False) -> 'Frame':
+               lighting: Lighting, segmentation: bool = False) -> Frame:
         """(rgb uint8 HxWx3, depth float32 HxW [m] along the optical axis, seg or None).
 
         Depth is ``inf`` and seg -1 where nothing is seen.
@@ -195,7 +195,7 @@ class GlRenderer:
                 vao.render()
         return self._read(segmentation)
 
-    def _read(self, segmentation: bool) -> 'Frame':
+    def _read(self, segmentation: bool) -> Frame:
         w, h = self.cam.width, self.cam.height
         # the projection draws row 0 at the top, so the buffers read out in image order
         rgb = np.frombuffer(self.fbo.read(components=3, attachment=0), np.uint8)
@@ -218,7 +218,7 @@ def _view_matrix(p_cam_map: ArrayLike, R_map_cam: ArrayLike) -> NDArray[np.float
     return view
 
 
-def _projection(cam: 'CameraConfig') -> NDArray[np.float64]:
+def _projection(cam: CameraConfig) -> NDArray[np.float64]:
     """GL projection of the pinhole K with pixel centres at integer pixel coordinates."""
     w, h, n, f = cam.width, cam.height, cam.near_m, cam.far_m
     # window x = u + 1/2 for u = fx X/Z + cx, and window y = v + 1/2 for v = fy Y/Z + cy:

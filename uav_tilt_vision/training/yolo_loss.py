@@ -30,7 +30,7 @@ from torch import nn
 
 from uav_tilt_vision.boxes import cell_xywh, head_view, wh_iou, xywh_to_xyxy
 from uav_tilt_vision.detector import STRIDES
-from uav_tilt_vision.yolo_data import IGNORE_CLASS
+from uav_tilt_vision.training.yolo_data import IGNORE_CLASS
 
 
 def ciou(a: torch.Tensor, b: torch.Tensor, eps: float = 1e-9) -> torch.Tensor:

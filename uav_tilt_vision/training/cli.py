@@ -1,6 +1,6 @@
 """``uav-tilt vision dataset|train|eval|compress|quantize|profile``; also ``python -m`` it.
 
-Every sub-command prints one JSON object on stdout (progress bars go to stderr).
+What it does and prints: :data:`DESCRIPTION`, the text of its ``--help``.
 """
 
 import argparse
@@ -15,6 +15,12 @@ from uav_tilt_common import cli_args
 
 MODELS = 'models'
 M = TypeVar('M')
+# plain text, laid out as written: --help prints it
+DESCRIPTION = """\
+The detector's offline work: render a labelled data set, train, evaluate, compress
+(prune, fine-tune, int8), quantize, profile.
+
+Every sub-command prints one JSON object on stdout (progress bars go to stderr)."""
 
 
 def log_stderr(line: str) -> None:
@@ -47,18 +53,18 @@ def _checkpoint(path: str, option: str) -> tuple[Path, Any]:
     return _model_file(path, option, load_model)
 
 
-def _dataset(a):
-    from uav_tilt_vision.dataset import DISTANCE_M, generate
+def _dataset(a: argparse.Namespace) -> dict[str, Any]:
+    from uav_tilt_vision.training.dataset import DISTANCE_M, generate
     meta = generate(a.out, a.n, a.seed, a.split, a.jobs, renderer=a.renderer,
                     distance_m=a.distance_m or DISTANCE_M)
     return {k: meta[k] for k in ('seed', 'split', 'n', 'classes', 'boxes_per_class',
                                  'renderer', 'distance_m')}
 
 
-def _train(a):
+def _train(a: argparse.Namespace) -> dict[str, Any]:
     from uav_tilt_vision.detector import IMG_SIZE, resize_input
-    from uav_tilt_vision.train import card_path, grown, train
-    from uav_tilt_vision.yolo_data import HSV_GAINS
+    from uav_tilt_vision.training.train import card_path, grown, train
+    from uav_tilt_vision.training.yolo_data import HSV_GAINS
     extra: dict[str, Any] = {'teacher': a.teacher} if a.teacher else {}
     init, model = _checkpoint(a.init, '--init') if a.init else (None, None)
     teacher = _checkpoint(a.teacher, '--teacher')[1] if a.teacher else None
@@ -84,37 +90,37 @@ def _train(a):
     return {k: v for k, v in card.items() if k != 'loss_history'}
 
 
-def _eval(a):
+def _eval(a: argparse.Namespace) -> dict[str, Any]:
     from uav_tilt_vision.backends import load_detector
-    from uav_tilt_vision.train import evaluate
+    from uav_tilt_vision.training.train import evaluate
     det = _model_file(a.model, '--model', lambda path: load_detector(path, a.backend))[1]
     # the file scored: a fallback runs another one than --model, and says why in its note
     return {**evaluate(det, a.data, resamples=a.bootstrap), 'model': det.model_path,
             'backend_used': det.backend, 'note': det.note}
 
 
-def _compress(a):
-    from uav_tilt_vision.compress import compress
+def _compress(a: argparse.Namespace) -> dict[str, Any]:
+    from uav_tilt_vision.training.compress import compress
     return compress(_checkpoint(a.model, '--model')[0], a.data, a.out_dir, a.ratio,
                     a.finetune_epochs, a.seed, a.calib_images, a.eval_data, crop=a.crop,
                     distill_gain=a.distill_gain, bf16=a.bf16, device=a.device,
                     workers=a.workers, log=log_stderr)
 
 
-def _quantize(a):
-    from uav_tilt_vision.compress import quantize
+def _quantize(a: argparse.Namespace) -> dict[str, Any]:
+    from uav_tilt_vision.training.compress import quantize
     return quantize(_checkpoint(a.model, '--model')[0], a.data, a.calib_images,
                     a.eval_data)
 
 
-def _profile(a):
-    from uav_tilt_vision.profile import report
+def _profile(a: argparse.Namespace) -> dict[str, Any]:
+    from uav_tilt_vision.training.profile import report
     return report([_checkpoint(m, '--model')[0] for m in a.model])
 
 
 def _device(text: str) -> str:
     """A torch device this machine has, or 'auto' (``train.resolve_device``)."""
-    from uav_tilt_vision.train import resolve_device
+    from uav_tilt_vision.training.train import resolve_device
     try:
         resolve_device(text)
     except ConfigError as err:
@@ -124,7 +130,7 @@ def _device(text: str) -> str:
 
 def _pruning_ratio(text: str) -> float:
     """A channel pruning ratio that torch-pruning honours (``compress.MAX_PRUNING_RATIO``)."""
-    from uav_tilt_vision.compress import MAX_PRUNING_RATIO
+    from uav_tilt_vision.training.compress import MAX_PRUNING_RATIO
     return cli_args.ratio_up_to(MAX_PRUNING_RATIO)(text)
 
 
@@ -139,7 +145,8 @@ class _Defaults(argparse.ArgumentDefaultsHelpFormatter):
 
 def parser() -> argparse.ArgumentParser:
     """The argparse parser of the vision sub-commands."""
-    ap = argparse.ArgumentParser(prog='uav-tilt vision', description=__doc__)
+    ap = argparse.ArgumentParser(prog='uav-tilt vision', description=DESCRIPTION,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--threads', type=cli_args.non_negative, default=0,
                     help='torch CPU threads (0: default)')
     sub = ap.add_subparsers(dest='command', required=True)
@@ -270,7 +277,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             ap.error(f'--{option.replace("_", "-")} must be positive multiples of 32, '
                      f'got {values}')
     if getattr(a, 'distance_m', None):
-        from uav_tilt_vision.dataset import check_distance
+        from uav_tilt_vision.training.dataset import check_distance
         try:
             check_distance(a.distance_m)
         except ConfigError as err:

@@ -17,10 +17,10 @@ import torch
 
 from uav_tilt_common.config import ConfigError
 from uav_tilt_vision.detector import DEFAULT_ANCHORS, IMG_SIZE, Detector, grow_scales, save_model
-from uav_tilt_vision.metrics import bootstrap, confidence_intervals, mean_ap
-from uav_tilt_vision.yolo_data import (HSV_GAINS, YoloDataset, collate, kmeans_anchors,
-                                       read_meta)
-from uav_tilt_vision.yolo_loss import YoloLoss, distill_loss
+from uav_tilt_vision.training.metrics import bootstrap, confidence_intervals, mean_ap
+from uav_tilt_vision.training.yolo_data import (HSV_GAINS, YoloDataset, collate,
+                                                kmeans_anchors, read_meta)
+from uav_tilt_vision.training.yolo_loss import YoloLoss, distill_loss
 
 if TYPE_CHECKING:
     from uav_tilt_vision.backends import OnnxDetector, TorchDetector

@@ -45,7 +45,8 @@ def mean_ap(preds: Rows, gts: Rows, ignores: Rows = None) -> dict[str, Any]:
     try:
         import pycocotools  # noqa: F401
     except ImportError:
-        return {**coco_map(preds, gts, ignores), 'backend': 'uav_tilt_vision.metrics.coco_map'}
+        return {**coco_map(preds, gts, ignores),
+                'backend': 'uav_tilt_vision.training.metrics.coco_map'}
     return {**pycocotools_map(preds, gts, ignores), 'backend': 'pycocotools'}
 
 

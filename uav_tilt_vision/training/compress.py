@@ -30,9 +30,10 @@ import torch
 
 from uav_tilt_common.config import ConfigError
 from uav_tilt_vision.detector import Detector, input_batch, load_model
-from uav_tilt_vision.profile import profile_model
-from uav_tilt_vision.train import card_path, check_crop, evaluate, git_commit, train
-from uav_tilt_vision.yolo_data import YoloDataset
+from uav_tilt_vision.training.profile import profile_model
+from uav_tilt_vision.training.train import card_path, check_crop, evaluate, git_commit, \
+    train
+from uav_tilt_vision.training.yolo_data import YoloDataset
 
 ONNX_OPSET = 17
 HEAD_OUTPUTS = ('head0', 'head1', 'head2', 'head3')

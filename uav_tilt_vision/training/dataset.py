@@ -37,7 +37,7 @@ from uav_tilt_common.pose import Pose
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim import textures
 from uav_tilt_sim.bullet import pybullet as p
-from uav_tilt_sim.camera import CameraConfig, Lighting, make_renderer
+from uav_tilt_sim.camera import CameraConfig, Lighting, Renderer, make_renderer
 from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
 from uav_tilt_sim.vehicle_body import create_vehicle
 from uav_tilt_sim.visuals import BOX, Scene, Visual, apply_texture, create_static_body
@@ -239,7 +239,7 @@ def labels_from_segmentation(seg: np.ndarray, info: WorldInfo, eye: np.ndarray,
 
 
 @functools.lru_cache(maxsize=None)
-def _renderer(renderer: str) -> Any:
+def _renderer(renderer: str) -> Renderer:
     """One renderer per process (a GL context is costly to make), reused for every world."""
     return make_renderer(dataclasses.replace(CameraConfig(), renderer=renderer))
 
@@ -262,6 +262,7 @@ def render_world(job: Job) -> list[int]:
                 extra.append(add_vehicle(scene, eye, R_cam))
             light = random_lighting(rng, spec, info.R_map_wall)
             rgb, _, seg = _renderer(renderer).render(scene, eye, R_cam, light, True)
+            assert seg is not None      # asked for
             for body in extra:
                 p.removeBody(body, physicsClientId=client)
                 scene.remove(body)
