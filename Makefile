@@ -26,7 +26,9 @@ test: $(STAMP)
 
 PACKAGES := uav_tilt_common uav_tilt_sim uav_tilt_control uav_tilt_vision uav_tilt_tools
 
-# flake8 over what test/test_lint.py checks, then the type checker (setup.cfg [mypy])
+# flake8 (99 columns), then the type checker (setup.cfg [mypy]: check_untyped_defs, and
+# disallow_untyped_defs for the packages annotated throughout); test/test_lint.py runs this
+# target, so `make test` fails on either
 lint: $(STAMP)
 	$(PY) -m flake8 $(PACKAGES) test setup.py
 	$(PY) -m mypy $(PACKAGES)

@@ -1,5 +1,6 @@
 """Conversions between ROS messages and the cores' numpy data (DESIGN section 3)."""
 import math
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -191,8 +192,9 @@ def image_cdr(array, stamp_ns, frame_id=names.FRAME_CAMERA):
 def array_of_image(msg):
     """numpy copy of an rgb8 or 32FC1 Image (a message or a :class:`cdr.CdrImage`); raises
     ValueError on anything else."""
+    dtype: np.dtype[Any]
     if msg.encoding == 'rgb8':
-        channels, dtype = 3, np.uint8
+        channels, dtype = 3, np.dtype(np.uint8)
     elif msg.encoding == '32FC1':
         channels, dtype = 1, np.dtype('>f4' if msg.is_bigendian else '<f4')
     else:

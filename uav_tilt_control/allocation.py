@@ -7,8 +7,10 @@ saturation handling (give up yaw, then roll/pitch, then clip) is closed form too
 """
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from uav_tilt_common.config import param
 from uav_tilt_common.geometry import article_wrench_p
@@ -37,7 +39,7 @@ class AllocationResult:
     torque_given_up_nm: np.ndarray  # FLU
 
     @property
-    def yaw_given_up_nm(self):
+    def yaw_given_up_nm(self) -> float:
         """Yaw torque (z_FLU) that could not be produced."""
         return float(self.torque_given_up_nm[2])
 
@@ -45,11 +47,11 @@ class AllocationResult:
 class Allocator:
     """Maps a body force (x_FLU, z_FLU) and torque (FLU) to four thrusts and alpha = beta."""
 
-    def __init__(self, vehicle: VehicleParams, config: AllocationConfig | None = None):
+    def __init__(self, vehicle: VehicleParams, config: AllocationConfig | None = None) -> None:
         self.vehicle = vehicle
         self.config = config or AllocationConfig()
 
-    def allocate(self, force_flu_xz, torque_flu) -> AllocationResult:
+    def allocate(self, force_flu_xz: ArrayLike, torque_flu: ArrayLike) -> AllocationResult:
         """Solve eq. (1)-(2) with alpha = beta; saturate as yaw, then roll/pitch, then clip."""
         # Plain floats: numpy's per-call cost on 2- and 4-vectors is most of a 300 Hz tick.
         v = self.vehicle
@@ -79,7 +81,8 @@ class Allocator:
         return AllocationResult(np.array(thrusts), tilt_rad, tilt_rad, saturated,
                                 np.array(force_lost), np.array(torque_lost))
 
-    def _thrusts_from_torque_p(self, tau_x_p, tau_y_p, tau_z_p, s, c):
+    def _thrusts_from_torque_p(self, tau_x_p: float, tau_y_p: float, tau_z_p: float, s: float,
+                               c: float) -> list[float]:
         """Thrust increments (rotor_1..4) producing the P-frame torque at tilt (s, c)."""
         l1, l2, k = self.vehicle.l1_m, self.vehicle.l2_m, self.vehicle.k_m
         # eq. (2a): front sum minus rear sum; the total stays unchanged.
@@ -95,7 +98,7 @@ class Allocator:
         return [0.5 * (front + d1), 0.5 * (rear + d2), 0.5 * (rear - d2), 0.5 * (front - d1)]
 
 
-def _sanitize(values, n):
+def _sanitize(values: ArrayLike, n: int) -> list[float]:
     """n finite, bounded floats (non-finite entries become 0)."""
     out = []
     for x in np.asarray(values, dtype=float).reshape(n).tolist():
@@ -103,7 +106,7 @@ def _sanitize(values, n):
     return out
 
 
-def _total_and_tilt(fx, fz, tilt_limit_rad):
+def _total_and_tilt(fx: float, fz: float, tilt_limit_rad: float) -> tuple[float, float]:
     """Total thrust and tilt for the force (fx, fz) in FLU: tan(alpha) = F_x / F_z."""
     if fz <= 0.0:
         # Thrust cannot point down: no force, and no reason to move the servos.
@@ -116,7 +119,8 @@ def _total_and_tilt(fx, fz, tilt_limit_rad):
     return fz / math.cos(tilt_rad), tilt_rad
 
 
-def _max_feasible_scale(base, delta, lo, hi):
+def _max_feasible_scale(base: Sequence[float], delta: Sequence[float], lo: float,
+                        hi: float) -> float:
     """Largest s in [0, 1] with lo <= base + s * delta <= hi (base assumed feasible)."""
     scale = 1.0
     for b, d in zip(base, delta):

@@ -8,6 +8,7 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.config import param
 from uav_tilt_common.geometry import (euler_zyx_to_matrix, matrix_to_quat, quat_multiply,
@@ -31,7 +32,8 @@ class AttitudeConfig:
     d_cutoff_hz: float = param(30.0, lo=1.0, hi=150.0)
 
 
-def attitude_setpoint(force_map, yaw_rad, pitch_rad=0.0, roll_limit_rad=0.6):
+def attitude_setpoint(force_map: ArrayLike, yaw_rad: float, pitch_rad: float = 0.0,
+                      roll_limit_rad: float = 0.6) -> tuple[NDArray[np.float64], float, float]:
     """Attitude R_map_base_d with the given yaw and pitch whose roll removes the y_FLU force.
 
     Returns (R_map_base_d, thrust_x_flu, thrust_z_flu): the force expressed in the desired
@@ -60,7 +62,7 @@ class AttitudePid:
     that is clamped and frozen while the output saturates (anti-windup).
     """
 
-    def __init__(self, inertia_kgm2, config: AttitudeConfig | None = None):
+    def __init__(self, inertia_kgm2: ArrayLike, config: AttitudeConfig | None = None) -> None:
         self.config = config or AttitudeConfig()
         self.inertia = np.asarray(inertia_kgm2, dtype=float)
         # Per-axis gains as float lists once: the tick runs on plain floats, as numpy's
@@ -72,13 +74,14 @@ class AttitudePid:
             cfg.rate_i_limit, cfg.accel_limit))))
         self.reset()
 
-    def reset(self):
+    def reset(self) -> None:
         """Clear integrator and derivative-filter state."""
         self.integral = np.zeros(3)
-        self._rate_prev = None
+        self._rate_prev: list[float] | None = None
         self._d_rate = np.zeros(3)
 
-    def update(self, R_map_base_d, state: VehicleState, dt_s):
+    def update(self, R_map_base_d: ArrayLike, state: VehicleState,
+               dt_s: float) -> NDArray[np.float64]:
         """One control tick; returns the body torque (FLU, N m)."""
         x, y, z, w = np.asarray(state.q_map_base, dtype=float).tolist()
         norm = math.sqrt(x * x + y * y + z * z + w * w)
@@ -114,5 +117,5 @@ class AttitudePid:
                          j2 * accel[2] + (w0 * h1 - w1 * h0)])
 
 
-def _sign(x):
+def _sign(x: float) -> int:
     return (x > 0.0) - (x < 0.0)

@@ -14,11 +14,14 @@ import functools
 import json
 import math
 import time
+from collections.abc import Callable, Collection, Iterable
+from typing import Any, TypeVar
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+from geometry_msgs.msg import Pose, PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
+from numpy.typing import NDArray
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -47,6 +50,8 @@ MIN_QUATERNION_NORM = 0.5
 # Setpoints are logged at most this often (wall clock), accepted and refused apart.
 SETPOINT_LOG_PERIOD_S = 1.0
 
+T = TypeVar('T')
+
 
 @dataclasses.dataclass
 class ControllerNodeConfig(ControllerConfig):
@@ -68,7 +73,7 @@ class ControllerNodeConfig(ControllerConfig):
 class ControllerNode(Node):
     """Thin shell: messages -> ControllerCore -> actuators/cmd and controller/status."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__('controller',
                          parameter_overrides=[Parameter('use_sim_time', value=True)])
         self.cfg = declare_config(self, ControllerNodeConfig)
@@ -90,7 +95,7 @@ class ControllerNode(Node):
                     ros_qos.LATCHED)
         # the plan and how its tasks went, JSON, re-sent when a task record changes
         self.pub_plan = self.create_publisher(String, names.CONTROLLER_PLAN, ros_qos.LATCHED)
-        self.plan_version = None
+        self.plan_version: int | None = None
         sub(self, Imu, names.IMU, self.on_imu, q, raw=True)
         for srv, method in ((names.SRV_TAKEOFF, self.core.takeoff),
                             (names.SRV_INSPECT, self.core.inspect),
@@ -100,15 +105,16 @@ class ControllerNode(Node):
 
         self.rejects = RejectCounter()
         self.nominal_dt_s = 1.0 / self.cfg.control_rate_hz
-        self.status = {}
-        self.last_stamp_ns = None
-        self.last_cmd = None
+        self.status: dict[str, Any] = {}
+        self.last_stamp_ns: int | None = None
+        self.last_cmd: bytes | None = None
         self.saturated_ticks = 0
         self.ticks = 0
-        self.wall_last = None
-        self.periods_s = collections.deque(maxlen=STATS_WINDOW)
-        self.compute_s = collections.deque(maxlen=STATS_WINDOW)
-        self.loop_stats = (-float('inf'), {})      # (wall time computed, values)
+        self.wall_last: float | None = None
+        self.periods_s: collections.deque[float] = collections.deque(maxlen=STATS_WINDOW)
+        self.compute_s: collections.deque[float] = collections.deque(maxlen=STATS_WINDOW)
+        # (wall time computed, values)
+        self.loop_stats: tuple[float, dict[str, float]] = (-float('inf'), {})
         self.core.autostart_held = self.cfg.hold_until_recorded
         self.wall_t0 = time.monotonic()
         # Wall clock: status keeps coming when sim time stalls (the plant is gone).
@@ -120,23 +126,23 @@ class ControllerNode(Node):
                                f'tasks={len(self.core.mission.plan)}')
 
     # --- inputs -------------------------------------------------------------------------
-    def _reject(self, reason, detail):
+    def _reject(self, reason: str, detail: str) -> None:
         if self.rejects.reject(reason):
             self.get_logger().warn(f'rejected {detail}; {self.rejects.total} rejected so far')
 
-    def _frame_ok(self, frame, frame_id, what):
+    def _frame_ok(self, frame: str, frame_id: str, what: str) -> bool:
         if frame != frame_id:
             self._reject('frame', f'{what} in frame {frame!r}, not {frame_id!r}')
             return False
         return True
 
-    def _finite(self, values, what):
+    def _finite(self, values: Iterable[float], what: str) -> bool:
         if not all(math.isfinite(v) for v in values):
             self._reject('non_finite', f'{what} with non-finite values')
             return False
         return True
 
-    def _unit(self, q, what):
+    def _unit(self, q: NDArray[np.float64], what: str) -> NDArray[np.float64] | None:
         """Quaternion ``q`` (an array) normalised, itself when it is a unit one already, or
         None (rejected and counted) when it is no rotation."""
         # odometry comes at 300 Hz: plain floats (numpy's per-call cost is most of this)
@@ -146,7 +152,7 @@ class ControllerNode(Node):
             return None
         return q if abs(norm - 1.0) < 1e-9 else q / norm
 
-    def _decoded(self, decode, data, what):
+    def _decoded(self, decode: Callable[[bytes], T], data: bytes, what: str) -> T | None:
         """``decode(data)``, or None (rejected) for a malformed message."""
         try:
             return decode(data)
@@ -154,7 +160,7 @@ class ControllerNode(Node):
             self._reject('malformed', f'{what}: malformed message ({exc})')
             return None
 
-    def on_odom(self, data):
+    def on_odom(self, data: bytes) -> None:
         """Odometry map -> base_link (serialized)."""
         decoded = self._decoded(ros_msgs.state_from_odometry_cdr, data, 'odom')
         if decoded is None:
@@ -181,7 +187,7 @@ class ControllerNode(Node):
             return
         self.core.on_odometry(state)
 
-    def on_wrench(self, data):
+    def on_wrench(self, data: bytes) -> None:
         """F/T sensor at the tool, ee_link (serialized)."""
         decoded = self._decoded(cdr.decode_wrench, data, 'ee_wrench')
         if decoded is None:
@@ -191,19 +197,20 @@ class ControllerNode(Node):
                 force + torque, 'ee_wrench'):
             self.core.on_wrench(force, torque)
 
-    def on_candidates(self, msg):
+    def on_candidates(self, msg: PointCloud2) -> None:
         """Vision's target candidates of one frame, camera optical frame (none: no target)."""
         candidates = self._camera_cloud(msg, names.TARGET_CANDIDATES, ros_msgs.candidates_of_msg)
         if candidates is not None:
             self.core.on_target_candidates(ros_msgs.from_stamp(msg.header.stamp), candidates)
 
-    def on_planes(self, msg):
+    def on_planes(self, msg: PointCloud2) -> None:
         """The planes vision saw in one frame, camera optical frame (for the search)."""
         planes = self._camera_cloud(msg, names.VISION_PLANES, ros_msgs.planes_of_msg)
         if planes is not None:
             self.core.on_planes(ros_msgs.from_stamp(msg.header.stamp), planes)
 
-    def _camera_cloud(self, msg, topic, decode):
+    def _camera_cloud(self, msg: PointCloud2, topic: str, decode: Callable[[PointCloud2], T]
+                      ) -> T | None:
         """``decode(msg)`` of a PointCloud2 of vision's, or None (rejected and counted) when
         it is not in the camera optical frame or not laid out as ``decode`` expects."""
         if not self._frame_ok(msg.header.frame_id, names.FRAME_CAMERA, topic):
@@ -214,24 +221,24 @@ class ControllerNode(Node):
             self._reject('layout', f'{topic}: {err}')
             return None
 
-    def on_ground_truth(self, msg, target_id=''):
+    def on_ground_truth(self, msg: PoseStamped, target_id: str = '') -> None:
         """Evaluation mode: the true pose in map of target ``target_id``."""
-        p_map, q_map_t = _pose_arrays(msg.pose)
+        p_map, q_raw = _pose_arrays(msg.pose)
         topic = names.ground_truth_target(target_id)
         if not (self._frame_ok(msg.header.frame_id, names.FRAME_MAP, topic) and self._finite(
-                np.concatenate([p_map, q_map_t]), topic)):
+                np.concatenate([p_map, q_raw]), topic)):
             return
-        q_map_t = self._unit(q_map_t, topic)
+        q_map_t = self._unit(q_raw, topic)
         if q_map_t is not None:
             self.core.on_ground_truth_target(p_map, q_map_t, target_id)
 
-    def on_setpoint(self, msg):
+    def on_setpoint(self, msg: PoseStamped) -> None:
         """A hover point and heading in map (accepted in HOVER)."""
-        p_map, q = _pose_arrays(msg.pose)
+        p_map, q_raw = _pose_arrays(msg.pose)
         if not (self._frame_ok(msg.header.frame_id, names.FRAME_MAP, 'setpoint/pose')
-                and self._finite(np.concatenate([p_map, q]), 'setpoint/pose')):
+                and self._finite(np.concatenate([p_map, q_raw]), 'setpoint/pose')):
             return
-        q = self._unit(q, 'setpoint/pose')
+        q = self._unit(q_raw, 'setpoint/pose')
         if q is None:
             return
         yaw = Rotation.from_quat(q).as_euler('ZYX')[0]
@@ -242,15 +249,16 @@ class ControllerNode(Node):
         else:
             self.get_logger().warn(line, throttle_duration_sec=SETPOINT_LOG_PERIOD_S)
 
-    def _trigger(self, name, method):
-        def callback(request, response):
+    def _trigger(self, name: str, method: Callable[[], tuple[bool, str]]
+                 ) -> Callable[[Any, Any], Any]:
+        def callback(request: Any, response: Any) -> Any:
             response.success, response.message = method()
             self.get_logger().info(f'{name}: {response.message}')
             return response
         return callback
 
     # --- the 300 Hz loop ----------------------------------------------------------------
-    def on_imu(self, data):
+    def on_imu(self, data: bytes) -> None:
         """One control tick, answered with actuators/cmd stamped like the IMU message."""
         decoded = self._decoded(cdr.decode_imu, data, 'imu')
         if decoded is None:
@@ -283,7 +291,7 @@ class ControllerNode(Node):
         self.saturated_ticks += int(self.status['saturated'])
 
     # --- status -------------------------------------------------------------------------
-    def _release_autostart(self):
+    def _release_autostart(self) -> None:
         """hold_until_recorded: answer ticks and let the autostart go once the recorder
         listens to controller/status and actuators/cmd (its subscriptions matched; other
         subscribers, the plant, a probe or a viewer, do not count), or the wait is over."""
@@ -295,7 +303,7 @@ class ControllerNode(Node):
                                    f'and actuators/cmd after {names.RECORDER_WAIT_S:.0f} s; '
                                    f'starting anyway')
 
-    def on_status(self):
+    def on_status(self) -> None:
         """controller/status: mode, mission, saturation, rejected inputs, loop statistics;
         and controller/plan when a task record changed."""
         if self.core.autostart_held:
@@ -319,12 +327,13 @@ class ControllerNode(Node):
             values.get('failsafe_reason') or 'ok'))
 
 
-def _pose_arrays(pose):
+def _pose_arrays(pose: Pose) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     o = pose.orientation
     return ros_msgs.vector_of(pose.position), np.array([o.x, o.y, o.z, o.w])
 
 
-def _loop_stats(periods_s, compute_s, nominal_dt_s):
+def _loop_stats(periods_s: Collection[float], compute_s: Collection[float],
+                nominal_dt_s: float) -> dict[str, float]:
     """Loop rate and wall-clock period jitter of the IMU callbacks, and compute time."""
     if len(periods_s) < 2:
         return {}
@@ -339,7 +348,7 @@ def _loop_stats(periods_s, compute_s, nominal_dt_s):
                 compute_us_p99=float(compute_p99))
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     """Entry point of the controller_node executable."""
     return run_node(ControllerNode, args)
 

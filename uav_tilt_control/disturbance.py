@@ -20,6 +20,7 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from uav_tilt_common.config import param
 from uav_tilt_control.lowpass import lowpass_weight
@@ -39,7 +40,8 @@ class DisturbanceConfig:
 class DisturbanceObserver:
     """Estimates F_ext [N, map]; call :meth:`update` every tick, read :attr:`f_ext_map`."""
 
-    def __init__(self, mass_kg, thrust_tau_s, config: DisturbanceConfig | None = None):
+    def __init__(self, mass_kg: float, thrust_tau_s: float,
+                 config: DisturbanceConfig | None = None) -> None:
         self.config = config or DisturbanceConfig()
         self.mass_kg = float(mass_kg)
         self.thrust_tau_s = float(thrust_tau_s)
@@ -47,21 +49,21 @@ class DisturbanceObserver:
         self.reset()
 
     @property
-    def vertical_active(self):
+    def vertical_active(self) -> bool:
         """Whether the vertical axis is estimated at all."""
         return self.config.tau_s > 0.0 and self._axes[2] > 0.0
 
-    def reset(self):
+    def reset(self) -> None:
         """Forget the estimate and the thrust model's state."""
         self.f_ext_map = np.zeros(3)
-        self._f_thrust_map = None      # what the rotors make now (model)
-        self._f_cmd_map = None         # the last command
+        self._f_thrust_map: NDArray[np.float64] | None = None  # what the rotors make now (model)
+        self._f_cmd_map: NDArray[np.float64] | None = None     # the last command
 
-    def commanded(self, f_thrust_map):
+    def commanded(self, f_thrust_map: ArrayLike) -> None:
         """The thrust force (map) just sent to the actuators."""
         self._f_cmd_map = np.asarray(f_thrust_map, dtype=float)
 
-    def take_vertical(self, f_n):
+    def take_vertical(self, f_n: float) -> float:
         """Add ``f_n`` to the vertical estimate as far as ``limit_n`` leaves room beside the
         horizontal one; returns the part it could not take [N]."""
         f = self.f_ext_map
@@ -70,7 +72,9 @@ class DisturbanceObserver:
         f[2] = min(max(wanted, -room), room)
         return wanted - f[2]
 
-    def update(self, R_map_base, specific_force_base, f_contact_map, dt_s, airborne=True):
+    def update(self, R_map_base: ArrayLike, specific_force_base: ArrayLike,
+               f_contact_map: ArrayLike, dt_s: float,
+               airborne: bool = True) -> NDArray[np.float64]:
         """One tick: the IMU's specific force (body) and the measured contact force (map),
         both over the tick since the last command. Returns the filtered F_ext (map).
 

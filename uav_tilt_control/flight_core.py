@@ -7,8 +7,10 @@ article's decoupling), so moving along x_FLU needs no pitching.
 import dataclasses
 
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from uav_tilt_common.config import nested
 from uav_tilt_common.geometry import cross3
@@ -35,7 +37,8 @@ class FlightCoreConfig:
 class FlightCore:
     """Pure control core: its only state is the filters and integrators of its parts."""
 
-    def __init__(self, vehicle: VehicleParams, config: FlightCoreConfig | None = None):
+    def __init__(self, vehicle: VehicleParams, config: FlightCoreConfig | None = None
+                 ) -> None:
         self.vehicle = vehicle
         self.config = config or FlightCoreConfig()
         self.impedance = ImpedanceController(vehicle.mass_kg, self.config.impedance)
@@ -46,19 +49,20 @@ class FlightCore:
         self._tip_flu = np.array([vehicle.tool_tip_x_m, 0.0, 0.0])
         self._airborne = False
 
-    def reset(self):
+    def reset(self) -> None:
         """Clear filter and integrator state (e.g. on arming)."""
         self.impedance.reset()
         self.disturbance.reset()
         self.attitude.reset()
         self._airborne = False
 
-    def safe_command(self):
+    def safe_command(self) -> ActuatorCommand:
         """Hover thrust at zero tilt: what is sent when the inputs cannot be trusted."""
         return ActuatorCommand(np.full(4, self.vehicle.hover_thrust_n), 0.0, 0.0)
 
-    def step(self, state: VehicleState, setpoint: ImpedanceSetpoint, f_contact_map, dt_s,
-             specific_force_base=None):
+    def step(self, state: VehicleState, setpoint: ImpedanceSetpoint, f_contact_map: ArrayLike,
+             dt_s: float, specific_force_base: ArrayLike | None = None
+             ) -> tuple[ActuatorCommand, dict[str, Any]]:
         """One control tick; returns (ActuatorCommand, diagnostics dict).
 
         ``specific_force_base``: the IMU's accelerometer (body, m/s^2) for the disturbance
@@ -107,7 +111,7 @@ class FlightCore:
         }
         return command, diagnostics
 
-    def _hand_weight_to_observer(self):
+    def _hand_weight_to_observer(self) -> None:
         """Leaving the ground: the observer's vertical axis starts learning, and it learns a
         weight error too (the IMU scales the thrust by the true mass), so what the hover-thrust
         estimator learnt of it on the climb becomes the observer's starting estimate instead
@@ -119,7 +123,8 @@ class FlightCore:
                 -self.impedance.f_hover_n)
 
 
-def _inputs_finite(state, setpoint, f_contact_map, dt_s):
+def _inputs_finite(state: VehicleState, setpoint: ImpedanceSetpoint, f_contact_map: ArrayLike,
+                   dt_s: float) -> bool:
     try:
         # one concatenate with the cast, not one array per input (this runs every tick)
         flat = np.concatenate(

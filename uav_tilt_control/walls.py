@@ -11,7 +11,9 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
+from uav_tilt_common.geometry import Vector
 from uav_tilt_control import frames
 
 MAX_TILT_RAD = math.radians(50.0)
@@ -29,27 +31,27 @@ class Wall:
     shares: list = dataclasses.field(default_factory=list)
 
     @property
-    def weight(self):
+    def weight(self) -> float:
         return float(sum(self.shares))
 
     @property
-    def point_map(self):
+    def point_map(self) -> NDArray[np.float64]:
         """The centroids' mean, weighted by share."""
         return np.average(self.centroids, axis=0, weights=self.shares)
 
     @property
-    def normal_map(self):
+    def normal_map(self) -> NDArray[np.float64]:
         return frames.unit(np.average(self.normals, axis=0, weights=self.shares))
 
     @property
-    def along_m(self):
+    def along_m(self) -> tuple[float, float]:
         """How far the centroids reach along the wall, (min, max) in m from ``point_map``
         along the horizontal ``x`` of :func:`frames.target_frame_from_normal`."""
         R, origin = frames.target_frame_from_normal(self.point_map, self.normal_map)
         along = (np.asarray(self.centroids) - origin) @ R[:, 0]
         return float(along.min()), float(along.max())
 
-    def altitudes_clear_of(self, p_map, reach_m):
+    def altitudes_clear_of(self, p_map: Vector, reach_m: float) -> tuple[float, float]:
         """The altitudes (lo, hi) at which the horizontal circle of radius ``reach_m``
         around ``p_map``'s vertical stays in front of this wall's plane: a wall leaning
         over ``p_map`` nears as one climbs, one leaning away as one descends."""
@@ -63,7 +65,8 @@ class Wall:
             return float(p_map[2] - spare_m / n[2]), math.inf
         return -math.inf, math.inf
 
-    def face_points(self, standoff_m, altitude_m, spacing_m):
+    def face_points(self, standoff_m: float, altitude_m: float,
+                    spacing_m: float) -> tuple[list[NDArray[np.float64]], float]:
         """Points at ``altitude_m``, ``standoff_m`` out from the wall horizontally, in
         front of the two ends of its extent (one, in front of the middle, when they are
         less than ``spacing_m`` apart); and the heading that faces the wall."""
@@ -81,10 +84,10 @@ class Wall:
 class WallMemory:
     """The walls of one search."""
 
-    def __init__(self):
-        self.walls = []
+    def __init__(self) -> None:
+        self.walls: list[Wall] = []
 
-    def observe(self, point_map, normal_map, share):
+    def observe(self, point_map: ArrayLike, normal_map: ArrayLike, share: float) -> bool:
         """One plane of a frame (map): added to the wall it lies on, or a new wall; planes
         far from vertical are left out. Returns whether it was a wall."""
         n = frames.unit(normal_map)
@@ -101,13 +104,13 @@ class WallMemory:
         wall.shares.append(float(share))
         return True
 
-    def altitudes_clear_of(self, p_map, reach_m):
+    def altitudes_clear_of(self, p_map: Vector, reach_m: float) -> tuple[float, float]:
         """The altitudes (lo, hi) at which every wall is clear of ``reach_m`` around
         ``p_map``'s vertical (:meth:`Wall.altitudes_clear_of`); lo > hi when none is."""
         ranges = [w.altitudes_clear_of(p_map, reach_m) for w in self.walls]
         return (max((r[0] for r in ranges), default=-math.inf),
                 min((r[1] for r in ranges), default=math.inf))
 
-    def best(self):
+    def best(self) -> Wall | None:
         """The wall seen most, or None."""
         return max(self.walls, key=lambda w: w.weight, default=None)
