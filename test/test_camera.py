@@ -15,9 +15,9 @@ from uav_tilt_sim import camera
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_sim.visuals import SPHERE, Scene, Visual, create_static_body
-from uav_tilt_vision import dataset
+from uav_tilt_vision.training import dataset
 from uav_tilt_vision.backends import load_detector
-from uav_tilt_vision.train import evaluate
+from uav_tilt_vision.training.train import evaluate
 
 RENDERERS = ('gl', 'tiny')
 INT8 = 'models/detector_int8.onnx'

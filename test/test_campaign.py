@@ -5,40 +5,44 @@ when it meets the inspection bar by the truth, not only when the controller comp
 import numpy as np
 import pytest
 
-from uav_tilt_tools import campaign as cp
-from uav_tilt_tools.task_metrics import failure_of
-from uav_tilt_tools.task_metrics import POI_BAR_M, task_results
+from uav_tilt_common.targets import HINT_ERROR_M
+from uav_tilt_sim import randomise as rd
+from uav_tilt_sim.randomise import random_draw
+from uav_tilt_tools.campaign.run import campaign
+from uav_tilt_tools.campaign.summary import summarize, wilson_interval
+from uav_tilt_tools.metrics.tasks import failure_of
+from uav_tilt_tools.metrics.tasks import POI_BAR_M, task_results
 
 pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
 
 
 def test_random_draws_cover_the_stated_ranges():
-    draws = [cp.random_draw(seed) for seed in range(300)]
+    draws = [random_draw(seed) for seed in range(300)]
     scenarios = [s for s, _ in draws]
     distance = np.array([np.hypot(*s.wall.position_m) for s in scenarios])
-    assert distance.min() >= cp.WALL_DISTANCE_M[0] and distance.max() <= cp.WALL_DISTANCE_M[1]
+    assert distance.min() >= rd.WALL_DISTANCE_M[0] and distance.max() <= rd.WALL_DISTANCE_M[1]
     # the wall's normal off the line of sight, and the start heading off the wall
     off_normal, start_off = [], []
     for s in scenarios:
         bearing = np.degrees(np.arctan2(s.wall.position_m[1], s.wall.position_m[0]))
-        off_normal.append(cp._wrap_deg(s.wall.yaw_deg - bearing))
-        start_off.append(cp._wrap_deg(s.start_yaw_deg - bearing))
-    assert np.max(np.abs(off_normal)) <= cp.WALL_YAW_DEG + 1e-9
-    assert np.ptp(off_normal) > cp.WALL_YAW_DEG and np.ptp(start_off) > 300.0
+        off_normal.append(rd._wrap_deg(s.wall.yaw_deg - bearing))
+        start_off.append(rd._wrap_deg(s.start_yaw_deg - bearing))
+    assert np.max(np.abs(off_normal)) <= rd.WALL_YAW_DEG + 1e-9
+    assert np.ptp(off_normal) > rd.WALL_YAW_DEG and np.ptp(start_off) > 300.0
     inclination = np.array([s.wall.inclination_deg for s in scenarios])
-    assert np.all(np.abs(inclination) <= cp.WALL_INCLINATION_DEG)
+    assert np.all(np.abs(inclination) <= rd.WALL_INCLINATION_DEG)
     stiffness = np.array([s.wall.stiffness_n_per_m for s in scenarios])
     assert stiffness.min() >= 500.0 and stiffness.max() <= 50000.0
     # log-uniform: as many draws below the geometric mean as above it
     assert abs(np.mean(stiffness < np.sqrt(500.0 * 50000.0)) - 0.5) < 0.1
     mass = np.array([s.mismatch.mass_scale for s in scenarios])
-    assert np.all(np.abs(mass - 1.0) <= cp.MASS_MISMATCH)
+    assert np.all(np.abs(mass - 1.0) <= rd.MASS_MISMATCH)
     for s, hint in draws:
         target = [o for o in s.objects if o.target]
-        assert len(target) == 1 and cp.TARGET_HEIGHT_M[0] <= target[0].v_m \
-            <= cp.TARGET_HEIGHT_M[1]
-        assert np.linalg.norm(s.wind.mean_m_s) <= cp.MEAN_WIND_M_S + 1e-9
-        assert 3.0 * s.wind.gust_std_m_s <= cp.GUST_PEAK_M_S + 1e-9
+        assert len(target) == 1 and rd.TARGET_HEIGHT_M[0] <= target[0].v_m \
+            <= rd.TARGET_HEIGHT_M[1]
+        assert np.linalg.norm(s.wind.mean_m_s) <= rd.MEAN_WIND_M_S + 1e-9
+        assert 3.0 * s.wind.gust_std_m_s <= rd.GUST_PEAK_M_S + 1e-9
         plates = [o for o in s.objects if o.cls == 'bolt_plate']
         # a look-alike comes with a hint within 0.3 m of the target
         assert (hint is not None) == (len(plates) > 1)
@@ -48,11 +52,11 @@ def test_random_draws_cover_the_stated_ranges():
         assert all(abs(o.u_m) < s.wall.width_m / 2 and 0.0 < o.v_m < s.wall.height_m
                    for o in s.objects)
     assert 0.15 < np.mean([h is not None for _, h in draws]) < 0.45
-    assert cp.random_draw(7) == cp.random_draw(7)
+    assert random_draw(7) == random_draw(7)
 
 
 def test_corner_draws_put_every_range_at_one_of_its_ends():
-    draws = [cp.random_draw(seed, corners=True) for seed in range(80)]
+    draws = [random_draw(seed, corners=True) for seed in range(80)]
 
     def at_ends(values, ends):
         values = np.asarray(values, dtype=float)
@@ -63,44 +67,44 @@ def test_corner_draws_put_every_range_at_one_of_its_ends():
     scenarios = [s for s, _ in draws]
     bearing = [np.degrees(np.arctan2(s.wall.position_m[1], s.wall.position_m[0]))
                for s in scenarios]
-    at_ends([np.hypot(*s.wall.position_m) for s in scenarios], cp.WALL_DISTANCE_M)
-    at_ends([cp._wrap_deg(s.wall.yaw_deg - b) for s, b in zip(scenarios, bearing)],
-            (-cp.WALL_YAW_DEG, cp.WALL_YAW_DEG))
+    at_ends([np.hypot(*s.wall.position_m) for s in scenarios], rd.WALL_DISTANCE_M)
+    at_ends([rd._wrap_deg(s.wall.yaw_deg - b) for s, b in zip(scenarios, bearing)],
+            (-rd.WALL_YAW_DEG, rd.WALL_YAW_DEG))
     # the start heading off the wall's direction: +-180 degrees are one heading, away
-    assert all(abs(abs(cp._wrap_deg(s.start_yaw_deg - b)) - 180.0) < 1e-6
+    assert all(abs(abs(rd._wrap_deg(s.start_yaw_deg - b)) - 180.0) < 1e-6
                for s, b in zip(scenarios, bearing))
     at_ends([s.wall.inclination_deg for s in scenarios],
-            (-cp.WALL_INCLINATION_DEG, cp.WALL_INCLINATION_DEG))
-    at_ends([s.wall.stiffness_n_per_m for s in scenarios], cp.STIFFNESS_N_PER_M)
-    assert {s.wall.stiffness_n_per_m for s in scenarios} == set(cp.STIFFNESS_N_PER_M)
-    at_ends([s.wall.friction for s in scenarios], cp.FRICTION)
-    at_ends([np.linalg.norm(s.wind.mean_m_s) for s in scenarios], (0.0, cp.MEAN_WIND_M_S))
-    at_ends([3.0 * s.wind.gust_std_m_s for s in scenarios], (0.0, cp.GUST_PEAK_M_S))
+            (-rd.WALL_INCLINATION_DEG, rd.WALL_INCLINATION_DEG))
+    at_ends([s.wall.stiffness_n_per_m for s in scenarios], rd.STIFFNESS_N_PER_M)
+    assert {s.wall.stiffness_n_per_m for s in scenarios} == set(rd.STIFFNESS_N_PER_M)
+    at_ends([s.wall.friction for s in scenarios], rd.FRICTION)
+    at_ends([np.linalg.norm(s.wind.mean_m_s) for s in scenarios], (0.0, rd.MEAN_WIND_M_S))
+    at_ends([3.0 * s.wind.gust_std_m_s for s in scenarios], (0.0, rd.GUST_PEAK_M_S))
     at_ends([s.mismatch.mass_scale for s in scenarios],
-            (1.0 - cp.MASS_MISMATCH, 1.0 + cp.MASS_MISMATCH))
+            (1.0 - rd.MASS_MISMATCH, 1.0 + rd.MASS_MISMATCH))
     targets = [next(o for o in s.objects if o.target) for s in scenarios]
-    at_ends([t.u_m for t in targets], (-cp.TARGET_U_M, cp.TARGET_U_M))
-    at_ends([t.v_m for t in targets], cp.TARGET_HEIGHT_M)
+    at_ends([t.u_m for t in targets], (-rd.TARGET_U_M, rd.TARGET_U_M))
+    at_ends([t.v_m for t in targets], rd.TARGET_HEIGHT_M)
     hinted = [(hint, t) for (_, hint), t in zip(draws, targets) if hint is not None]
     assert hinted
     for hint, t in hinted:
         np.testing.assert_allclose(np.abs([hint[0] - t.u_m, hint[1] - t.v_m]),
-                                   cp.HINT_ERROR_M)
+                                   HINT_ERROR_M)
     assert all(abs(o.u_m) < s.wall.width_m / 2 and 0.0 < o.v_m < s.wall.height_m
                for s in scenarios for o in s.objects)
     # the uniform draw is another world
-    assert cp.random_draw(7, corners=True) != cp.random_draw(7)
+    assert random_draw(7, corners=True) != random_draw(7)
 
 
 def test_wilson_interval():
-    low, high = cp.wilson_interval(19, 20)
+    low, high = wilson_interval(19, 20)
     # the textbook value for 19 of 20 at 95%: [0.764, 0.991]
     assert low == pytest.approx(0.764, abs=1e-3) and high == pytest.approx(0.991, abs=1e-3)
     # all successes (or none): the rate lies inside its own interval, without rounding
     for n in (1, 7, 20, 40, 333):
-        low, high = cp.wilson_interval(n, n)
+        low, high = wilson_interval(n, n)
         assert low <= 1.0 == high
-        low, high = cp.wilson_interval(0, n)
+        low, high = wilson_interval(0, n)
         assert low == 0.0 <= high
 
 
@@ -131,13 +135,13 @@ def test_a_completed_run_off_the_bar_by_the_truth_is_a_failure():
     assert failure_of(pushed)['reason'] == 'force_off_setpoint'
     runs = [dict(within, failure=failure_of(within)),
             dict(elsewhere, failure=failure_of(elsewhere))]
-    result = cp.summarize(2, 0, 'vision', runs)
+    result = summarize(2, 0, 'vision', runs)
     assert result['successes'] == 1 and result['failures'] == {'off_target in HOLD': 1}
 
 
 def test_campaign_of_twenty_fresh_draws_succeeds_in_at_least_95_percent():
     seed = int(np.random.default_rng().integers(0, 2**31 - 1))
-    result = cp.campaign(20, seed=seed, progress=False)
+    result = campaign(20, seed=seed, progress=False)
     assert result['n'] == 20 and len(result['runs']) == 20
     failed = [r for r in result['runs'] if r['failure']]
     assert all(r['failure']['reason'] and r['failure']['mode'] for r in failed)
@@ -152,7 +156,7 @@ def test_corner_campaign_succeeds_at_the_ends_of_every_range():
     # 40 of 40 (seed 20261211): at least 8 of 10 fails about once in a thousand runs at a
     # true rate of 98%, and certainly when a kind of corner (a stiff wall, say) fails.
     seed = int(np.random.default_rng().integers(0, 2**31 - 1))
-    result = cp.campaign(10, seed=seed, progress=False, corners=True)
+    result = campaign(10, seed=seed, progress=False, corners=True)
     assert result['corners'] is True and result['n'] == 10
     failed = [r for r in result['runs'] if r['failure']]
     assert result['successes'] >= 8, (seed, [(r['seed'], r['failure']) for r in failed])

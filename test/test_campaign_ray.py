@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from uav_tilt_tools import campaign as cp
+from uav_tilt_tools.campaign import run as cp
 
 # Alone: beside a vision mission on the other core the Ray campaign took 115 s against
 # 11.5 s by itself (the local backend's 2.2x), and the killed-worker test has a deadline.

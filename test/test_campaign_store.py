@@ -14,11 +14,12 @@ from rosbags.rosbag2 import Reader
 
 from uav_tilt_common import names
 from uav_tilt_common.config import ConfigError
-from uav_tilt_tools import campaign as cp
-from uav_tilt_tools import recording
-from uav_tilt_tools.campaign_store import RUNS_FILE, RESULT_FILE, run_dir
-from uav_tilt_tools.mcap_bag import METADATA_FILE, RECORDING_FILE
-from uav_tilt_tools.mission_metrics import mode_samples
+from uav_tilt_sim import randomise
+from uav_tilt_tools.bag import reader as recording
+from uav_tilt_tools.bag.folder import METADATA_FILE, RECORDING_FILE
+from uav_tilt_tools.campaign import run as cp
+from uav_tilt_tools.campaign.store import RUNS_FILE, RESULT_FILE, run_dir
+from uav_tilt_tools.metrics.mission import mode_samples
 
 # Enough runs that some are still flying when the first is kept, however fast they fly
 # (8 s of sim time takes 1-4 s here).
@@ -165,8 +166,8 @@ def test_corners_reach_every_run_and_a_resume_keeps_them(tmp_path):
     result = json.loads(done.stdout)
     assert result['corners'] is True
     for run in result['runs']:
-        for key, ends in (('wall_stiffness_n_per_m', cp.STIFFNESS_N_PER_M),
-                          ('wall_distance_m', cp.WALL_DISTANCE_M)):
+        for key, ends in (('wall_stiffness_n_per_m', randomise.STIFFNESS_N_PER_M),
+                          ('wall_distance_m', randomise.WALL_DISTANCE_M)):
             assert min(abs(run[key] / end - 1.0) for end in ends) < 1e-9, (key, run[key])
     # the folder holds a corner campaign: resuming it as a uniform one is refused
     with pytest.raises(ConfigError):

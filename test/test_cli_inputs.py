@@ -9,9 +9,9 @@ import yaml
 from rosbags.rosbag2 import Reader
 
 from uav_tilt_tools import cli
-from uav_tilt_tools.fly import check_world, fly
-from uav_tilt_tools.mcap_bag import METADATA_FILE, RECORDING_FILE
-from uav_tilt_tools.report import SUMMARY_KEYS
+from uav_tilt_tools.bag.folder import METADATA_FILE, RECORDING_FILE
+from uav_tilt_tools.report.summary import SUMMARY_KEYS
+from uav_tilt_tools.runner.fly import check_world, fly
 from uav_tilt_sim.scenario import load_scenario
 
 PLAN = {'tasks': [{'touch': {'target': 'plate_a', 'near_uv_m': [-0.4, 1.5]}}]}

@@ -9,18 +9,22 @@ from scipy.spatial.transform import Rotation
 from uav_tilt_common.vehicle import GRAVITY, VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig
 from uav_tilt_common.modes import Mode
+from uav_tilt_common.config import from_dict
 from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.scenario import ObjectConfig, WallConfig, check_scenario, load_scenario
 from uav_tilt_sim import textures
-from uav_tilt_tools.fly import check_plan, fly
-from uav_tilt_tools.inprocess import Flight, mission_result, run_mission
+from uav_tilt_tools.runner.fly import check_plan, fly
+from uav_tilt_tools.runner.inprocess import Flight, mission_result, run_mission
 
 SCENARIO = load_scenario()
 ALTITUDE_M = 1.5
 
 
 def _config(**mission):
-    return ControllerConfig(target_source='ground_truth', mission=MissionConfig(**mission))
+    """Ground truth, and the mission parameters given by their dotted names in the mission's
+    groups (``**{'contact.hold_time_s': 5.0}``)."""
+    return ControllerConfig(target_source='ground_truth',
+                            mission=from_dict(MissionConfig, mission))
 
 
 def _hovering(config=None, scenario=SCENARIO):
@@ -44,7 +48,7 @@ def _pitch_rad(q):
 
 def test_takeoff_and_a_1_m_forward_step_settles_without_pitching():
     # A fast reference (its 1 s minimum segment) makes the move a smoothed step.
-    flight = _hovering(_config(hover_speed_m_s=3.0))
+    flight = _hovering(_config(**{'flight.hover_speed_m_s': 3.0}))
     try:
         p0 = flight.plant.state().p_map
         assert p0[2] == pytest.approx(ALTITUDE_M, abs=0.02)
@@ -119,7 +123,7 @@ def test_the_disturbance_observer_rejects_a_steady_external_force():
 
 
 def test_inspection_pushes_5_n_and_reaches_the_poi():
-    config = _config(hold_time_s=5.0)
+    config = _config(**{'contact.hold_time_s': 5.0})
     assert config.contact_force == 5.0
     result = run_mission(SCENARIO, config, 120.0)
     modes = [m for _, m in result['mode_history']]
@@ -131,7 +135,7 @@ def test_inspection_pushes_5_n_and_reaches_the_poi():
     assert result['force_rms_error_n'] <= 0.2
     assert result['contact_lost'] == 0
     assert result['poi_error_max_m'] < 0.01
-    assert result['max_force_n'] < config.mission.force_limit_n
+    assert result['max_force_n'] < config.mission.failsafe.force_limit_n
 
 
 def test_a_wall_softer_than_the_campaign_s_is_pushed_into_and_left():
@@ -153,13 +157,13 @@ def test_a_stream_of_setpoints_is_followed_at_its_speed():
     arrival tolerance, and stops on the last one."""
     rng = np.random.default_rng()
     config = _config()
-    u = rng.uniform(0.2, 0.7) * config.mission.hover_speed_m_s
+    u = rng.uniform(0.2, 0.7) * config.mission.flight.hover_speed_m_s
     rate_hz = rng.uniform(20.0, 50.0)
     # any heading but towards the scenario's wall, 2.5 m ahead (+x): a stream of up to
     # 2.8 m into it ends in the back-off from what the tool touches
     heading = rng.uniform(0.5 * np.pi, 1.5 * np.pi)
     direction = np.array([np.cos(heading), np.sin(heading), 0.0])
-    tol_m = config.mission.arrive_tol_m
+    tol_m = config.mission.flight.arrive_tol_m
     flight = _hovering(config)
     try:
         p0 = flight.plant.state().p_map.copy()
@@ -248,7 +252,7 @@ def test_a_mass_error_learnt_on_the_climb_is_not_counted_twice_in_hover():
         flight.run(5.0)
         _, p = _series(flight, 'p_map', t0)
         # HOVER starts on arrival, within arrive_tol_m, and stays there
-        assert np.abs(p[:, 2] - ALTITUDE_M).max() < config.mission.arrive_tol_m, (
+        assert np.abs(p[:, 2] - ALTITUDE_M).max() < config.mission.flight.arrive_tol_m, (
             scenario.mismatch.mass_scale)
     finally:
         flight.close()
@@ -268,7 +272,7 @@ def test_a_landing_tracks_its_descent_with_a_mass_error():
                           < 0.01)
         flight.core.setpoint_hook = lambda sp: setpoints.append(sp) or sp
         assert flight.core.land()[0]
-        z_air_m = config.mission.ground_z_m + 2.0 * config.mission.land_detect_height_m
+        z_air_m = config.mission.land.ground_z_m + 2.0 * config.mission.land.detect_height_m
         assert flight.run(20.0, until=lambda f: f.plant.state().p_map[2] < z_air_m)
         t0 = flight.log[-len(setpoints)]['t_s']
         _, p = _series(flight, 'p_map', t0)
@@ -301,7 +305,7 @@ def test_a_vehicle_half_to_twice_as_heavy_as_its_model_hovers_and_lands(lightest
         t0 = flight.t_s
         flight.run(5.0)
         _, p = _series(flight, 'p_map', t0)
-        assert np.abs(p[:, 2] - ALTITUDE_M).max() < config.mission.arrive_tol_m, scale
+        assert np.abs(p[:, 2] - ALTITUDE_M).max() < config.mission.flight.arrive_tol_m, scale
         assert flight.core.land()[0]
         assert flight.run(30.0, until=lambda f: f.core.mission.mode == Mode.IDLE)
         # the rotors stopped with the vehicle on its gear
@@ -344,14 +348,14 @@ def test_a_landing_on_ground_higher_than_ground_z_lands_there():
     # ground_z_m a fresh 0.4-1.5 m below the real ground (as odometry drifting up, or a
     # roof, would make it): the descent stops on the ground and the rotors stop there
     below_m = float(np.random.default_rng().uniform(0.4, 1.5))
-    cfg = _config(ground_z_m=-below_m)
+    cfg = _config(**{'land.ground_z_m': -below_m})
     flight = _hovering(cfg)
     try:
         z_ground = flight.log[0]['p_map'][2]
         t0 = flight.t_s
         assert flight.core.land()[0]
         mission, impedance = cfg.mission, cfg.flight.impedance
-        descent_s = 1.875 * (ALTITUDE_M - z_ground) / mission.descent_rate_m_s
+        descent_s = 1.875 * (ALTITUDE_M - z_ground) / mission.land.descent_rate_m_s
         # landed once the setpoint has come down to ground_z_m below it and the thrust asked
         # for is below land_detect_thrust_ratio of the weight, land_detect_s later: the
         # spring pulls down by K_z below_m / M (at most the acceleration limit), the
@@ -359,10 +363,11 @@ def test_a_landing_on_ground_higher_than_ground_z_lands_there():
         mass_kg = VehicleParams().mass_kg
         k_per_kg = impedance.free.k_c(mass_kg)[0].max() / mass_kg
         pull_m_s2 = min(k_per_kg * below_m, impedance.accel_limit_mps2)
-        wind_s = max(0.0, (1.0 - mission.land_detect_thrust_ratio) * GRAVITY - pull_m_s2) / (
+        wind_s = max(0.0, (1.0 - mission.land.detect_thrust_ratio) * GRAVITY - pull_m_s2) / (
             k_per_kg * below_m / impedance.hover_estimator_tau_s)
-        to_ground_s = 1.875 * (ALTITUDE_M - mission.ground_z_m) / mission.descent_rate_m_s
-        assert flight.run(to_ground_s + wind_s + mission.land_detect_s + 1.0,
+        to_ground_s = (1.875 * (ALTITUDE_M - mission.land.ground_z_m)
+                       / mission.land.descent_rate_m_s)
+        assert flight.run(to_ground_s + wind_s + mission.land.detect_s + 1.0,
                           until=lambda f: f.core.mission.mode == Mode.IDLE)
         assert flight.t_s - t0 > descent_s
         landed, height_m, above = flight.core.mission.events[-1]['reason'].split(' ', 2)
@@ -385,13 +390,13 @@ def test_a_rotor_lost_in_flight_flips_the_vehicle_and_the_rotors_stop():
         flight.plant.step = lambda command: step(dataclasses.replace(
             command, thrusts_n=np.where(np.arange(4) == dead, 0.0, command.thrusts_n)))
         upset = lambda f: Rotation.from_quat(    # noqa: E731
-            f.plant.state().q_map_base).as_matrix()[2, 2] < np.cos(mission.upset_tilt_rad)
+            f.plant.state().q_map_base).as_matrix()[2, 2] < np.cos(mission.failsafe.upset_tilt_rad)
         assert flight.run(5.0, until=upset)
         t_upset = flight.t_s
-        assert flight.run(mission.upset_s + 0.1,
+        assert flight.run(mission.failsafe.upset_s + 0.1,
                           until=lambda f: f.core.mission.mode == Mode.IDLE)
         # odometry comes a tick late: the rotors stop upset_s after the truth passed the limit
-        assert flight.t_s - t_upset == pytest.approx(mission.upset_s, abs=0.02)
+        assert flight.t_s - t_upset == pytest.approx(mission.failsafe.upset_s, abs=0.02)
         assert flight.status['failsafe_reason'] == 'upset'
         flight.step()
         assert np.all(flight.log[-1]['command'].thrusts_n == 0.0)
@@ -431,7 +436,7 @@ def test_a_slide_caught_on_an_object_on_its_line_fails_and_the_plan_goes_on(tmp_
 def test_force_above_the_limit_retreats():
     # Start near the wall so the approach is short.
     scenario = dataclasses.replace(SCENARIO, start_xyz_m=[1.3, 0.0, 0.0])
-    config = _config(standoff_m=0.25)
+    config = _config(**{'contact.standoff_m': 0.25})
     flight = Flight(scenario, config)
     try:
         flight.step()
@@ -444,10 +449,10 @@ def test_force_above_the_limit_retreats():
         assert flight.run(1.0, until=lambda f: f.core.mission.mode == Mode.RETREAT)
         flight.plant.external_force_map = np.zeros(3)
         assert flight.status['failsafe_reason'] == 'force_limit'
-        assert max(e['push_n'] for e in flight.log) > config.mission.force_limit_n
+        assert max(e['push_n'] for e in flight.log) > config.mission.failsafe.force_limit_n
         flight.run(8.0)
         tip_gap = wall_x - flight.plant.tool_tip_map()[0]
-        assert tip_gap == pytest.approx(config.mission.standoff_m, abs=0.05)
+        assert tip_gap == pytest.approx(config.mission.contact.standoff_m, abs=0.05)
         assert flight.log[-1]['push_n'] == 0.0
     finally:
         flight.close()
@@ -510,7 +515,7 @@ def test_a_leaning_wall_is_cleared_on_take_off_and_landing(lean):
     assert result['force_mean_n'] == pytest.approx(5.0, abs=0.1), what
     assert result['force_rms_error_n'] <= 0.2, what
     # landed clear of the wall, not resting the tool on it
-    assert landed_ft_n < config.mission.free_flight_contact_n, what
+    assert landed_ft_n < config.mission.bump.threshold_n, what
 
 
 def test_the_camera_rendering_or_not_leaves_wind_noise_and_trajectory_unchanged():

@@ -148,7 +148,7 @@ def test_the_installed_graph_flies_the_ground_truth_mission(workspace, probe, tm
     controller = start_installed(workspace, 'controller_node',
                                  params={'target_source': 'ground_truth',
                                          'autostart': 'inspect', 'use_sim_time': 'true',
-                                         'mission.hold_time_s': 2.0},
+                                         'mission.contact.hold_time_s': 2.0},
                                  log_path=tmp_path / 'controller.log')
     modes, statuses, plant = [], [], None
 

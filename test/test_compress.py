@@ -9,7 +9,7 @@ import onnxruntime as ort
 import pytest
 import torch
 
-from uav_tilt_vision import compress
+from uav_tilt_vision.training import compress
 from uav_tilt_vision.backends import load_detector
 from uav_tilt_vision.detector import Detector, load_model, save_model
 

@@ -29,7 +29,7 @@ def probe():
 def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
     controller = start('uav_tilt_control.controller_node', log_path=tmp_path / 'controller.log',
                        params={'target_source': 'ground_truth', 'autostart': 'inspect',
-                               'mission.hold_time_s': 2.0})
+                               'mission.contact.hold_time_s': 2.0})
     modes = []
 
     def on_status(msg):

@@ -9,9 +9,9 @@ import pytest
 from uav_tilt_sim.camera import CameraConfig, Lighting, make_renderer
 from uav_tilt_sim.visuals import Scene
 from uav_tilt_sim.textures import OBJECT_CLASSES, OBJECT_SIZE_M
-from uav_tilt_vision import dataset, vision_cli
-from uav_tilt_vision.yolo_data import (IGNORE_CLASS, YoloDataset, random_crop,
-                                       read_labels)
+from uav_tilt_vision.training import cli as vision_cli, dataset
+from uav_tilt_vision.training.yolo_data import (IGNORE_CLASS, YoloDataset, random_crop,
+                                                read_labels)
 
 
 @pytest.fixture(scope='module')

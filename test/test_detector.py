@@ -8,9 +8,9 @@ import pytest
 import torch
 from torch import nn
 
-from uav_tilt_vision import vision_cli
+from uav_tilt_vision.training import cli as vision_cli
 from uav_tilt_vision.detector import REF_CHANNELS, Detector, load_model, save_model
-from uav_tilt_vision.profile import profile_model
+from uav_tilt_vision.training.profile import profile_model
 
 torch.set_num_threads(2)
 

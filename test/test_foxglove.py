@@ -72,7 +72,7 @@ def test_bridge_advertises_and_streams_the_channels(tmp_path):
     pytest.importorskip('foxglove')
     plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log')
     log_path = tmp_path / 'foxglove.log'
-    bridge = start('uav_tilt_tools.foxglove_bridge', log_path=log_path,
+    bridge = start('uav_tilt_tools.graph.foxglove_bridge', log_path=log_path,
                    params={'port': 0, 'use_sim_time': 'true'})
     client = None
     try:
@@ -107,7 +107,7 @@ def test_bridge_advertises_and_streams_the_channels(tmp_path):
 
 def test_without_foxglove_sdk_the_node_exits_0_with_one_line():
     script = ('import sys; sys.modules["foxglove"] = None\n'
-              'from uav_tilt_tools.foxglove_bridge import main\n'
+              'from uav_tilt_tools.graph.foxglove_bridge import main\n'
               'sys.exit(main())')
     result = subprocess.run([sys.executable, '-c', script], cwd=REPO, capture_output=True,
                             text=True, timeout=60)
@@ -122,7 +122,7 @@ def test_a_port_in_use_is_one_line_and_exit_2(tmp_path):
         taken.bind(('127.0.0.1', 0))
         taken.listen()
         port = taken.getsockname()[1]
-        result = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.foxglove_bridge',
+        result = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.graph.foxglove_bridge',
                                  '--ros-args', '-p', f'port:={port}'], cwd=REPO,
                                 capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and 'Traceback' not in result.stderr, result.stderr

@@ -8,10 +8,10 @@ from gymnasium.utils.env_checker import check_env
 
 from uav_tilt_common.modes import NOT_FLYING
 from uav_tilt_control.controller_core import ControllerConfig
-from uav_tilt_tools import gym_env
-from uav_tilt_tools.inprocess import mission_result
+from uav_tilt_tools.gym import env as gym_env
+from uav_tilt_tools.runner.inprocess import mission_result
 
-MODULE_ID = f'uav_tilt_tools.gym_env:{gym_env.ENV_ID}'
+MODULE_ID = f'uav_tilt_tools.gym.env:{gym_env.ENV_ID}'
 
 
 def test_check_env_passes_with_the_camera():
@@ -150,7 +150,7 @@ def test_the_missions_controller_earns_the_reward_its_touch_metrics_imply():
         cfg = base.cfg
         dt_s = base.flight.plant.dt_tick
         hold_ticks = round(metrics['hold_time_s'] / dt_s) + 1
-        assert hold_ticks * dt_s >= cfg.controller.mission.hold_time_s
+        assert hold_ticks * dt_s >= cfg.controller.mission.contact.hold_time_s
         # mean over HOLD of 1 - (force error / scale)^2 - POI error / scale, per step
         implied = hold_ticks / base.ticks_per_step * (
             1.0 - (metrics['force_rms_error_n'] / cfg.force_scale_n) ** 2

@@ -18,7 +18,7 @@ from mcap_ros2.decoder import DecoderFactory
 from ros_graph import REPO, alive, children, status_values
 from uav_tilt_common import names, ros_qos
 from uav_tilt_sim.camera import CameraConfig
-from uav_tilt_tools.mission_watch import MissionWatch
+from uav_tilt_tools.graph.mission_watch import MissionWatch
 
 pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
 
@@ -170,7 +170,7 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
         code = subprocess.run(
             [LAUNCH, '--no-vision', '--mission', 'inspect', '--target-source', 'ground_truth',
              '--record', str(run_dir), '--param', 'controller.contact_force:=4.0',
-             '--param', 'controller.mission.hold_time_s:=3.0'],
+             '--param', 'controller.mission.contact.hold_time_s:=3.0'],
             cwd=tmp_path, stdout=log, stderr=subprocess.STDOUT, timeout=400).returncode
     text = log_path.read_text()
     assert code == 0, text[-6000:]

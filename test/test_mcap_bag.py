@@ -11,7 +11,8 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
 from uav_tilt_common import names, ros_msgs, ros_qos
-from uav_tilt_tools.mcap_bag import METADATA_FILE, McapBag
+from uav_tilt_tools.bag.folder import METADATA_FILE
+from uav_tilt_tools.bag.writer import McapBag
 
 # a second publisher of odometry that offers best effort and a deadline
 BEST_EFFORT = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -98,7 +99,7 @@ def test_a_file_that_does_not_have_its_folder_to_itself_gets_no_metadata(tmp_pat
     (names.CONTROLLER_STATUS, ros_qos.STATUS)])
 def test_the_contract_offer_is_what_the_nodes_publish_with(relative, offered):
     """What a bag records for a topic before its publisher is heard from."""
-    from uav_tilt_tools.topic_graph import contract_offer
+    from uav_tilt_tools.graph.topics import contract_offer
     got = contract_offer(relative)
     assert (got.reliability, got.durability, got.depth) == (
         offered.reliability, offered.durability, offered.depth)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from uav_tilt_vision.metrics import (bootstrap, coco_map, confidence_intervals, mean_ap,
-                                     set_matches, summarize)
+from uav_tilt_vision.training.metrics import (bootstrap, coco_map, confidence_intervals,
+                                              mean_ap, set_matches, summarize)
 
 GT = np.array([[0, 0, 10, 10, 0.0]])
 

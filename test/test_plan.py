@@ -16,16 +16,17 @@ from uav_tilt_control.controller_core import ControllerConfig, ControllerCore, p
 from uav_tilt_control.impedance import ImpedanceConfig
 from uav_tilt_control.mission import MissionConfig
 from uav_tilt_control.plan import LineProgress, Slide, Touch, load_plan, parse_plan
-from uav_tilt_control.site import HINT_ERROR_M, SiteConfig
+from uav_tilt_common.targets import HINT_ERROR_M
+from uav_tilt_control.site import SiteConfig
 from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_tools.fly import DURATION_S, default_duration_s
-from uav_tilt_tools.site_params import ros_arguments, site_overrides
+from uav_tilt_tools.runner.fly import DURATION_S, default_duration_s
+from uav_tilt_tools.runner.site_params import ros_arguments, site_overrides
 
 REPO = pathlib.Path(__file__).resolve().parent.parent
 SCENARIO = REPO / 'config' / 'scenarios' / 'plan.yaml'
 PLAN = REPO / 'config' / 'plans' / 'inspection.yaml'
-FORCES = (MissionConfig().contact_threshold_n, MissionConfig().force_limit_n,
-          'mission.contact_threshold_n, mission.force_limit_n')
+FORCES = (MissionConfig().contact.threshold_n, MissionConfig().failsafe.force_limit_n,
+          'mission.contact.threshold_n, mission.failsafe.force_limit_n')
 
 
 def _site():
@@ -77,7 +78,7 @@ def test_the_shipped_plan_resolves_on_its_wall():
     ([_slide(to_uv_m=[1.3, 1.0])], ['tasks[0] (slide)', 'repeats']),
     # a tool tip that never moved would be within the tolerance of the end of a line so short
     ([_slide(to_uv_m=[1.33, 1.0])], ['tasks[0] (slide)', '0.03 m long',
-                                     'slide_path_tolerance_m']),
+                                     'slide.path_tolerance_m']),
     ([{'touch': {'target': 'plate_a'}}], ['tasks[0] (touch)', "'near_uv_m' is required"]),
     ([{'drill': {}}], ['tasks[0]', 'touch', 'slide']),
     ([_touch(hold=3.0)], ["unknown parameter 'tasks[0].touch.hold'"]),
@@ -85,7 +86,7 @@ def test_the_shipped_plan_resolves_on_its_wall():
 def test_a_bad_plan_is_refused_with_one_line(tasks, words):
     with pytest.raises(ConfigError) as err:
         parse_plan({'tasks': tasks}, _site(), FORCES,
-                   tolerance_m=MissionConfig().slide_path_tolerance_m)
+                   tolerance_m=MissionConfig().slide.path_tolerance_m)
     message = str(err.value)
     assert '\n' not in message
     for word in words:
@@ -111,7 +112,7 @@ def test_a_plan_below_the_lowest_the_mission_works_at_is_refused(tmp_path):
     # the controller checks its plan file so, with its own mission's ground
     with pytest.raises(ConfigError, match='below .* the lowest the mission works at'):
         plan_of(_config(tmp_path, refused[:1]))
-    assert plan_of(_config(tmp_path, refused[:1], **{'mission.ground_z_m': -1.0}))
+    assert plan_of(_config(tmp_path, refused[:1], **{'mission.land.ground_z_m': -1.0}))
 
 
 def test_the_default_time_limit_covers_what_the_plan_pushes():
@@ -122,11 +123,11 @@ def test_the_default_time_limit_covers_what_the_plan_pushes():
     tasks = parse_plan({'tasks': [_touch(hold_s=hold_s),
                                   _slide(from_uv_m=[1.3, 0.7], to_uv_m=[1.3, 2.5],
                                          speed_m_s=speed_m_s)]}, _site(), FORCES)
-    flight_s = DURATION_S - MissionConfig().hold_time_s
+    flight_s = DURATION_S - MissionConfig().contact.hold_time_s
     assert default_duration_s(tasks) >= hold_s + 1.8 / speed_m_s + 2 * flight_s - 1e-9
     # the plan of the defaults keeps the per-task limit
     assert default_duration_s(load_plan(PLAN, _site(), FORCES)) == pytest.approx(
-        3 * DURATION_S + 1.0 / 0.1 - MissionConfig().hold_time_s)
+        3 * DURATION_S + 1.0 / 0.1 - MissionConfig().contact.hold_time_s)
 
 
 def test_a_push_beyond_what_the_vehicle_pushes_is_refused(tmp_path):
@@ -134,7 +135,7 @@ def test_a_push_beyond_what_the_vehicle_pushes_is_refused(tmp_path):
     its commanded acceleration, whose norm is limited: on a vertical wall 14 N were asked,
     the push stopped at that product (9.6 N) and the task held on, short of its force."""
     reach_n = VehicleParams().mass_kg * ImpedanceConfig().accel_limit_mps2
-    assert reach_n < MissionConfig().force_limit_n
+    assert reach_n < MissionConfig().failsafe.force_limit_n
     for kind in (_touch, _slide):
         with pytest.raises(ConfigError) as err:
             plan_of(_config(tmp_path, [kind(force_n=reach_n + 0.05)]))
@@ -152,7 +153,7 @@ def test_a_push_beyond_what_the_vehicle_pushes_is_refused(tmp_path):
 
 
 def test_a_line_just_longer_than_the_slides_tolerance_is_taken():
-    tolerance_m = MissionConfig().slide_path_tolerance_m
+    tolerance_m = MissionConfig().slide.path_tolerance_m
     (slide,) = parse_plan({'tasks': [_slide(to_uv_m=[1.3, 1.0 + tolerance_m * 1.01])]},
                           _site(), FORCES, tolerance_m=tolerance_m)
     assert slide.length_m > tolerance_m
@@ -210,7 +211,7 @@ def test_the_controller_takes_the_plan_file_and_inspect_stays_one_touch(tmp_path
     inspect = ControllerCore(VehicleParams(), ControllerConfig(contact_force=7.0))
     (task,) = inspect.mission.plan
     assert isinstance(task, Touch) and task.target == '' and task.hint_map is None
-    assert task.force_n == 7.0 and task.hold_s == MissionConfig().hold_time_s
+    assert task.force_n == 7.0 and task.hold_s == MissionConfig().contact.hold_time_s
     with pytest.raises(ConfigError, match="'plan' needs 'plan_file'"):
         plan_of(ControllerConfig(autostart='plan'))
     with pytest.raises(ConfigError, match="autostart 'inspect' is the one-touch"):
@@ -228,7 +229,8 @@ def test_controller_node_stops_with_one_line_on_a_bad_plan(tmp_path):
     names a target the site does not have."""
     path = tmp_path / 'plan.yaml'
     path.write_text(yaml.safe_dump({'tasks': [_touch(target='plate_z')]}))
-    site = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.site_params', str(SCENARIO)],
+    site = subprocess.run([sys.executable, '-m', 'uav_tilt_tools.runner.site_params',
+                           str(SCENARIO)],
                           capture_output=True, text=True, check=True).stdout.splitlines()
     cmd = [sys.executable, '-m', 'uav_tilt_control.controller_node', '--ros-args',
            '-p', 'autostart:=plan', '-p', f'plan_file:={path}', *site]

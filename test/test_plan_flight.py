@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_tools.fly import check_plan, fly
+from uav_tilt_tools.runner.fly import check_plan, fly
 
 REPO = pathlib.Path(__file__).resolve().parent.parent
 MODEL = REPO / 'models' / 'detector_int8.onnx'

@@ -2,7 +2,6 @@
 every node its own process, the targets from their ground-truth topics, so no camera)
 succeeds, and the report of its recording has the per-task results and the slide's plot.
 Vision in the loop flies the same plan in test_plan_flight.py."""
-import argparse
 import json
 import os
 import subprocess
@@ -10,7 +9,7 @@ import subprocess
 import pytest
 
 from ros_graph import REPO
-from uav_tilt_tools import report
+from uav_tilt_tools import cli
 
 pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
 
@@ -34,7 +33,7 @@ def test_the_plan_through_the_node_graph_succeeds_and_is_reported(tmp_path):
              '--target-source', 'ground_truth', '--record', str(run_dir), *PLANT],
             cwd=tmp_path, stdout=log, stderr=subprocess.STDOUT, timeout=TIMEOUT_S).returncode
     assert code == 0, log_path.read_text()[-4000:]
-    assert report.run(argparse.Namespace(run_dir=str(run_dir))) == 0
+    assert cli.main(['report', str(run_dir)]) == 0
     summary = json.loads((run_dir / 'summary.json').read_text())
     assert summary['success'] is True
     tasks = summary['tasks']

@@ -139,11 +139,11 @@ def _pressing_flight(tmp_path, on):
     from uav_tilt_control.controller_core import ControllerConfig
     from uav_tilt_control.mission import Mode
     from uav_tilt_sim import vehicle_body
-    from uav_tilt_tools.inprocess import Flight
-    from uav_tilt_tools.site_params import site_overrides
+    from uav_tilt_tools.runner.inprocess import Flight
+    from uav_tilt_tools.runner.site_params import site_overrides
     scenario = load_scenario()
     scenario.wall.friction = 0.4
-    values = {'target_source': 'ground_truth', 'mission.hold_time_s': 30.0}
+    values = {'target_source': 'ground_truth', 'mission.contact.hold_time_s': 30.0}
     if on == 'plate':
         # the plate's friction is loaded by an unmeasured push, which the disturbance
         # observer would otherwise take over from it
@@ -205,6 +205,6 @@ def test_importing_the_simulator_prints_nothing():
     """pybullet's C module prints its build time on stderr at import: every command would
     start with that line above its own one-line errors (uav_tilt_sim.bullet hides it)."""
     out = subprocess.run([sys.executable, '-c',
-                          'import uav_tilt_sim.plant, uav_tilt_vision.dataset'],
+                          'import uav_tilt_sim.plant, uav_tilt_vision.training.dataset'],
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout == '' and out.stderr == '', out

@@ -35,7 +35,7 @@ def test_lockstep_driver_timeout_bad_commands_and_clean_shutdown(tmp_path, probe
                   params={'camera_enabled': 'false', 'lockstep_timeout_s': TIMEOUT_S,
                           'status_rate_hz': 10.0})
     report = tmp_path / 'driver.json'
-    driver = start('uav_tilt_tools.hover_driver', '--ticks', '300', '--stay',
+    driver = start('uav_tilt_tools.graph.hover_driver', '--ticks', '300', '--stay',
                    '--out', str(report), log_path=tmp_path / 'driver.log')
     try:
         probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
@@ -89,7 +89,7 @@ def test_lockstep_driver_timeout_bad_commands_and_clean_shutdown(tmp_path, probe
 def test_driver_answers_a_re_sent_tick_again(tmp_path, probe):
     """The plant re-sends its first tick until a command arrives; an answer that went out
     before the plant's subscription matched is lost, so the re-sent tick needs it again."""
-    driver = start('uav_tilt_tools.hover_driver', '--ticks', '2', '--out',
+    driver = start('uav_tilt_tools.graph.hover_driver', '--ticks', '2', '--out',
                    str(tmp_path / 'driver.json'), log_path=tmp_path / 'driver.log')
     try:
         imu = probe.node.create_publisher(Imu, names.IMU, ros_qos.CONTROL)

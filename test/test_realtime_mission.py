@@ -13,8 +13,8 @@ import pytest
 
 from ros_graph import REPO
 from uav_tilt_common.vehicle import VehicleParams
-from uav_tilt_tools.recording import load_recording
-from uav_tilt_tools.report import summarize
+from uav_tilt_tools.bag.reader import load_recording
+from uav_tilt_tools.report.summary import summarize
 
 pytestmark = pytest.mark.alone   # the graph in real time keeps up only with the CPU
 LAUNCH = os.path.join(REPO, 'scripts', 'launch.sh')

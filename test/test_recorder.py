@@ -18,7 +18,7 @@ from rosbags.rosbag2 import Reader
 
 from ros_graph import Probe, start, stop
 from uav_tilt_common import names, ros_qos
-from uav_tilt_tools.recorder_node import output_path
+from uav_tilt_tools.bag.recorder_node import output_path
 
 pytestmark = pytest.mark.alone   # rates in real time
 RTF = 0.25              # slow enough that plant, camera and two recorders keep up on 2 cores
@@ -61,9 +61,9 @@ def recordings(tmp_path_factory):
             (tmp / 'plant.log').read_text()
         # a topic outside the contract, found by discovery with the QoS its publisher offers
         probe.node.create_publisher(String, OFFER_TOPIC, OFFER_QOS)
-        recorder = start('uav_tilt_tools.recorder_node', log_path=tmp / 'recorder.log',
+        recorder = start('uav_tilt_tools.bag.recorder_node', log_path=tmp / 'recorder.log',
                          params={'output': str(tmp)})
-        killed = start('uav_tilt_tools.recorder_node', log_path=tmp / 'killed.log',
+        killed = start('uav_tilt_tools.bag.recorder_node', log_path=tmp / 'killed.log',
                        params={'output': str(tmp / 'killed' / 'killed.mcap'),
                                'exclude': CAMERA,
                                'flush_period_s': 0.5})

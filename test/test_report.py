@@ -1,6 +1,5 @@
 """uav-tilt report on synthetic recordings: exact summary values, plots, missing topics,
 files the recorder did not finish."""
-import argparse
 import json
 import math
 import shutil
@@ -20,9 +19,12 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import ControllerConfig, ControllerCore
 from uav_tilt_control.controller_node import _loop_stats
 from uav_tilt_common.modes import Mode
-from uav_tilt_tools import recording, report, task_metrics
-from uav_tilt_tools.mcap_bag import McapBag
-from uav_tilt_tools.report_plots import write_plots
+from uav_tilt_tools import cli
+from uav_tilt_tools.bag import reader as recording
+from uav_tilt_tools.bag.writer import McapBag
+from uav_tilt_tools.metrics import tasks as task_metrics
+from uav_tilt_tools.report import summary as report
+from uav_tilt_tools.report.plots import write_plots
 
 TOOL_X = VehicleParams().tool_tip_x_m
 DT = 1.0 / 300
@@ -275,7 +277,7 @@ def test_report_command_reads_the_mcap_and_writes_summary_and_plots(tmp_path, ca
         write(bag, topic, msg, log_ns)
     bag.close()
     # the tool tip off the point of interest: the run missed the bar, exit 1 (as fly)
-    assert report.run(argparse.Namespace(run_dir=str(tmp_path))) == 1
+    assert cli.main(['report', str(tmp_path)]) == 1
     assert 'incomplete' not in capsys.readouterr().out
     summary = json.loads((tmp_path / 'summary.json').read_text())
     assert summary == report.summarize(rec, TOOL_X)
@@ -331,7 +333,7 @@ def test_the_report_exits_0_only_for_a_run_that_met_the_bar(tmp_path, capsys):
         for log_ns, topic, msg in in_time_order(rec):
             write(bag, topic, msg, log_ns)
         bag.close()
-        assert report.run(argparse.Namespace(run_dir=str(run))) == code
+        assert cli.main(['report', str(run)]) == code
         summary = json.loads(capsys.readouterr().out)
         assert (summary['failure'] is None) == (code == 0), summary['failure']
 
@@ -358,7 +360,7 @@ def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, cap
         data = src.read()
         dst.write(data[:flushed + 100])     # the second chunk torn, no footer
     bag.close()
-    assert report.run(argparse.Namespace(run_dir=str(run))) == 1
+    assert cli.main(['report', str(run)]) == 1
     out, err = capsys.readouterr()
     read = sum(topic in recording.REPORT_TOPICS for _, topic, _ in messages[:cut])
     assert 'incomplete (no footer' in err and f'read {read} messages' in err
@@ -370,19 +372,19 @@ def test_a_file_without_its_end_is_read_to_its_last_complete_chunk(tmp_path, cap
     assert summary['force_mean_n'] == pytest.approx(5.5) and summary['success'] is False
     # The finished file reads completely.
     shutil.copy(live / 'recording.mcap', run / 'recording.mcap')
-    assert report.run(argparse.Namespace(run_dir=str(run))) == 1
+    assert cli.main(['report', str(run)]) == 1
     assert 'incomplete' not in capsys.readouterr().err
     assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
     # a file torn within its first record (shorter than MCAP's footer) is an empty run
     for size in (len(MCAP0_MAGIC), 20):
         (run / 'recording.mcap').write_bytes(data[:size])
-        assert report.run(argparse.Namespace(run_dir=str(run))) == 1
+        assert cli.main(['report', str(run)]) == 1
         out, err = capsys.readouterr()
         assert 'read 0 messages' in err and json.loads(out)['success'] is None   # no data
     # the file itself, as well as its folder; the summary goes beside it
     shutil.copy(live / 'recording.mcap', run / 'recording.mcap')
     (run / 'summary.json').unlink()
-    assert report.run(argparse.Namespace(run_dir=str(run / 'recording.mcap'))) == 1
+    assert cli.main(['report', str(run / 'recording.mcap')]) == 1
     assert json.loads((run / 'summary.json').read_text()) == report.summarize(rec, TOOL_X)
 
 
@@ -401,7 +403,7 @@ def test_a_folder_without_an_mcap_recording_is_refused_with_one_line(tmp_path, c
             (tmp_path / name).write_bytes(MCAP0_MAGIC)
     elif content not in (None, 'missing'):
         (tmp_path / 'recording.mcap').write_bytes(content)
-    assert report.run(argparse.Namespace(run_dir=str(run_dir))) == 2
+    assert cli.main(['report', str(run_dir)]) == 2
     out, err = capsys.readouterr()
     assert err.startswith('uav-tilt report: ') and why in err and err.count('\n') == 1
     assert out == '' and not (tmp_path / 'summary.json').exists()

@@ -7,7 +7,7 @@ from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError, from_dict
 from uav_tilt_control.controller_core import ControllerConfig, plan_of
 from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_tools.site_params import site_overrides
+from uav_tilt_tools.runner.site_params import site_overrides
 
 
 def test_from_the_source_tree_the_files_are_the_checkout(tmp_path, monkeypatch):

@@ -20,7 +20,8 @@ from uav_tilt_common.geometry import wall_point, wall_rotation
 from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.scenario import Scenario, check_scenario
 from uav_tilt_sim.world import PANEL_THICKNESS_M
-from uav_tilt_tools.fly import fly, site_overrides
+from uav_tilt_tools.runner.fly import fly
+from uav_tilt_tools.runner.site_params import site_overrides
 
 MODEL = pathlib.Path(__file__).resolve().parent.parent / 'models' / 'detector_int8.onnx'
 SETPOINT_N = 5.0
@@ -162,8 +163,8 @@ def _seen_off_normal_deg(scenario):
     normal = wall_rotation(wall.yaw_deg, wall.inclination_deg)[:, 2]
     cfg = MissionConfig()
     sights = [np.array([0.0, 0.0, z]) - poi for z in (
-        cfg.takeoff_altitude_m, cfg.takeoff_altitude_m + cfg.search_climb_m,
-        cfg.takeoff_altitude_m - cfg.search_descend_m)]
+        cfg.flight.takeoff_altitude_m, cfg.flight.takeoff_altitude_m + cfg.search.climb_m,
+        cfg.flight.takeoff_altitude_m - cfg.search.descend_m)]
     return [np.degrees(np.arccos(s @ normal / np.linalg.norm(s))) for s in sights]
 
 
@@ -176,5 +177,5 @@ def test_a_target_seen_far_off_its_normal_is_found_from_in_front_of_the_wall(fli
     _meets_the_bar(result, f'wall yaw {scenario.wall.yaw_deg:.0f} deg')
     modes = dict((m, t) for t, m in reversed(result['mode_history']))
     cfg = MissionConfig()
-    turns_s = 3 * 2.0 * np.pi / min(cfg.search_yaw_rate_rad_s, cfg.yaw_rate_rad_s)
+    turns_s = 3 * 2.0 * np.pi / min(cfg.search.yaw_rate_rad_s, cfg.flight.yaw_rate_rad_s)
     assert modes['APPROACH'] - modes['SEARCH'] > turns_s, result

@@ -96,7 +96,7 @@ def test_every_field_has_a_descriptor_with_its_range_and_unit(node_of):
 NODE_CONFIGS = ('uav_tilt_sim.plant_node:PlantNodeConfig',
                 'uav_tilt_control.controller_node:ControllerNodeConfig',
                 'uav_tilt_vision.vision_node:VisionNodeConfig',
-                'uav_tilt_tools.foxglove_bridge:FoxgloveConfig')
+                'uav_tilt_tools.graph.foxglove_bridge:FoxgloveConfig')
 
 
 @pytest.mark.parametrize('path', NODE_CONFIGS)
@@ -109,7 +109,7 @@ def test_counts_are_not_given_a_physical_unit(path):
     assert units and all(unit in ('', 'px') for unit in units.values()), units
 
 
-@pytest.mark.parametrize('path', NODE_CONFIGS[:3] + ('uav_tilt_tools.recorder_node:'
+@pytest.mark.parametrize('path', NODE_CONFIGS[:3] + ('uav_tilt_tools.bag.recorder_node:'
                                                      'RecorderConfig',))
 def test_the_readme_names_every_parameter_of_the_nodes(path):
     module, name = path.split(':')

@@ -8,10 +8,11 @@ import pytest
 import torch
 
 from uav_tilt_vision.detector import DEFAULT_ANCHORS, STRIDES, load_model
-from uav_tilt_vision.train import card_path, evaluate, grown, train
-from uav_tilt_vision.yolo_data import (IGNORE_CLASS, YoloDataset, collate, kmeans_anchors,
-                                       read_labels)
-from uav_tilt_vision.yolo_loss import YoloLoss, assign, ciou, distill_loss, ignored_cells
+from uav_tilt_vision.training.train import card_path, evaluate, grown, train
+from uav_tilt_vision.training.yolo_data import (IGNORE_CLASS, YoloDataset, collate,
+                                                kmeans_anchors, read_labels)
+from uav_tilt_vision.training.yolo_loss import YoloLoss, assign, ciou, distill_loss, \
+    ignored_cells
 
 torch.set_num_threads(2)
 
@@ -242,14 +243,14 @@ def test_overfit_four_images(tmp_path):
 
 
 def test_cli_continued_run_keeps_its_lineage(data8, tmp_path):
-    from uav_tilt_vision import vision_cli
+    from uav_tilt_vision.training import cli as vision_cli
     model = tmp_path / 'pruned.pt'
     train(data8, model, epochs=1, seed=0, batch=4, width_mult=0.125, device='cpu',
           log=lambda s: None)
     first = json.loads(card_path(model).read_text())
     first.update(source='models/fp32.pt', pruning_ratio=0.25)
     card_path(model).write_text(json.dumps(first))
-    # continue in place, as the README's last fine-tune of the pruned model does
+    # continue in place, as docs/detector.md's last fine-tune of the pruned model does
     args = ['train', '--data', str(data8), '--init', str(model), '--out', str(model),
             '--epochs', '1', '--seed', '1', '--batch', '4', '--device', 'cpu']
     assert vision_cli.main(args) == 0
@@ -262,7 +263,7 @@ def test_cli_continued_run_keeps_its_lineage(data8, tmp_path):
 def test_a_model_is_trained_at_its_own_input_size(data8, tmp_path):
     """A given model (a pruned or resized one) is fed inputs of its ``img_size``, whatever
     ``img_size`` says; the CLI's --img-size resizes an --init model and keeps its weights."""
-    from uav_tilt_vision import vision_cli
+    from uav_tilt_vision.training import cli as vision_cli
     small = tmp_path / 'small.pt'
     train(data8, small, epochs=1, seed=0, batch=4, width_mult=0.125, img_size=(256, 192),
           device='cpu', log=lambda s: None)
@@ -287,7 +288,7 @@ def test_a_model_is_trained_at_its_own_input_size(data8, tmp_path):
 
 
 def test_grown_model_adds_a_finer_head_and_keeps_the_others(data8, tmp_path):
-    from uav_tilt_vision import vision_cli
+    from uav_tilt_vision.training import cli as vision_cli
     three = tmp_path / 'three.pt'
     anchors = [[[90.0, 90.0], [100.0, 100.0], [110.0, 110.0]],
                [[65.0, 65.0], [70.0, 70.0], [80.0, 80.0]],
@@ -372,7 +373,7 @@ def test_teacher_must_match_the_student(data8, tmp_path):
 
 
 def test_compress_cli_fine_tunes_from_the_unpruned_teacher(data8, tmp_path, capsys):
-    from uav_tilt_vision import vision_cli
+    from uav_tilt_vision.training import cli as vision_cli
     fp32 = tmp_path / 'fp32.pt'
     train(data8, fp32, epochs=1, seed=0, batch=4, width_mult=0.25, scales=3, device='cpu',
           log=lambda s: None)

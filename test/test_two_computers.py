@@ -1,4 +1,4 @@
-"""The two-computer split of the README, run for real: the flight-controller side (plant,
+"""The split of docs/two-computers.md, run for real: the flight-controller side (plant,
 controller, recorder) in one network namespace, the companion side (vision) in another,
 joined by a veth pair; discovery beyond localhost; the lockstep mission with vision in the
 loop across the link meets the demo's bar, and the link's target/pose latency is reported."""
@@ -14,7 +14,7 @@ import pytest
 
 from ros_graph import REPO
 from uav_tilt_common import names
-from uav_tilt_tools import recording
+from uav_tilt_tools.bag import reader as recording
 
 pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
 
@@ -83,7 +83,7 @@ def test_the_mission_with_vision_across_the_link(link, tmp_path, record_property
     try:
         controller = side(
             fc_ns, cc_ip, '--no-vision', '--mission', 'inspect', '--record', str(run_dir),
-            '--param', 'controller.mission.hold_time_s:=3.0',
+            '--param', 'controller.mission.contact.hold_time_s:=3.0',
             # Wall-clock log times: image out -> pose back, both on this side's clock.
             '--param', 'recorder.use_sim_time:=false',
             '--param', 'recorder.exclude:=camera/color/image_raw,camera/depth/image_raw,'

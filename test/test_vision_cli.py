@@ -4,7 +4,7 @@ import json
 import pytest
 
 from uav_tilt_common import resources
-from uav_tilt_vision import vision_cli
+from uav_tilt_vision.training import cli as vision_cli
 
 FP32 = str(resources.default_path('models/detector_fp32.pt'))
 

@@ -10,11 +10,11 @@ import torch
 
 from uav_tilt_common import resources
 from uav_tilt_common.config import ConfigError
-from uav_tilt_vision import vision_cli
-from uav_tilt_vision.compress import MAX_PRUNING_RATIO, prune
+from uav_tilt_vision.training import cli as vision_cli
+from uav_tilt_vision.training.compress import MAX_PRUNING_RATIO, prune
 from uav_tilt_vision.detector import Detector, load_model
-from uav_tilt_vision.train import card_path, train
-from uav_tilt_vision.yolo_data import read_labels
+from uav_tilt_vision.training.train import card_path, train
+from uav_tilt_vision.training.yolo_data import read_labels
 
 torch.set_num_threads(2)
 FP32 = str(resources.default_path('models/detector_fp32.pt'))

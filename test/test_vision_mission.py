@@ -9,7 +9,8 @@ from uav_tilt_common.config import from_dict
 from uav_tilt_control.controller_core import ControllerConfig
 from uav_tilt_sim.plant import PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_tools.inprocess import camera_vision, run_mission
+from uav_tilt_tools.runner.camera_vision import camera_vision
+from uav_tilt_tools.runner.inprocess import run_mission
 
 pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
 

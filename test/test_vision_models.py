@@ -20,14 +20,14 @@ from scipy.spatial.transform import Rotation
 
 from uav_tilt_sim.camera import CameraConfig, make_renderer
 from uav_tilt_sim.visuals import Scene
-from uav_tilt_vision import dataset, vision_cli
+from uav_tilt_vision.training import cli as vision_cli, dataset
 from uav_tilt_vision.backends import load_detector
-from uav_tilt_vision.compress import size_stats
+from uav_tilt_vision.training.compress import size_stats
 from uav_tilt_vision.detector import Detector, load_model, resize_input
-from uav_tilt_vision.metrics import bootstrap, mean_ap, percentile_interval
+from uav_tilt_vision.training.metrics import bootstrap, mean_ap, percentile_interval
 from uav_tilt_vision.pipeline import VisionPipeline
 from uav_tilt_vision.target_pose import CameraIntrinsics
-from uav_tilt_vision.train import card_path, predict_set, world_groups
+from uav_tilt_vision.training.train import card_path, predict_set, world_groups
 
 pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
 

@@ -20,7 +20,7 @@ from uav_tilt_common.pose import Pose
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim.camera import CameraConfig
 from uav_tilt_sim.scenario import DEFAULT_SCENARIO
-from uav_tilt_tools import topic_graph
+from uav_tilt_tools.graph import topics as topic_graph
 from uav_tilt_vision.pipeline import FrameResult
 from uav_tilt_vision.vision_node import NO_CAMERA_INFO_WARN_FRAMES, VisionNodeConfig, \
     pose_msg
@@ -180,7 +180,7 @@ def test_poses_follow_the_camera_stream_and_agree_with_ground_truth(tmp_path, pr
     probe.spin_until(lambda: all(
         probe.node.count_publishers(topic) for topic in (names.TARGET_POSE,
                                                          names.GROUND_TRUTH_ODOM)), 30.0)
-    driver = start('uav_tilt_tools.hover_driver', '--ticks', '1000000000',
+    driver = start('uav_tilt_tools.graph.hover_driver', '--ticks', '1000000000',
                    '--out', str(tmp_path / 'driver.json'), log_path=tmp_path / 'driver.log')
     try:
         assert probe.spin_until(lambda: len(probe.messages[names.TARGET_POSE]) >= 60, 60.0), \
