@@ -104,6 +104,10 @@ class ImpedanceController:
         self.f_hover_n = 0.0       # learnt weight correction, map z
         self.trim_n = 0.0          # the push's trim (force_tau_s), along -z_t
         self._push_n = 0.0         # the push asked for on the tick before
+        # the reference it tracked on the last update, in frame t: the setpoint's with the
+        # push's depth behind it
+        self.lambda_d_t = np.zeros(3)
+        self.dlambda_d_t = np.zeros(3)
 
     def reset(self) -> None:
         """Clear the contact-force filter, the push's trim and the hover-thrust estimate."""
@@ -135,6 +139,7 @@ class ImpedanceController:
         lambda_t = R_map_t.T @ (np.asarray(p_map, dtype=float) - setpoint.origin_map)
         dlambda_t = R_map_t.T @ np.asarray(v_map, dtype=float)   # the target is at rest
         lambda_d_t, dlambda_d_t = self._pushed(setpoint, R_map_t, f_contact_map, dt_s)
+        self.lambda_d_t, self.dlambda_d_t = lambda_d_t, dlambda_d_t
         e_t = lambda_t - lambda_d_t
         de_t = dlambda_t - dlambda_d_t
         K, C = self.gains(setpoint.contact_gains)

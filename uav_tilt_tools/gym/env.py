@@ -18,23 +18,24 @@ tens of simulated seconds).
 
 **Action: an offset of the impedance law's setpoint, not its gains.** Box(-1, 1, (3,)):
 a shift of the desired position lambda_d along the wall (x_t, y_t, up to ``max_offset_m``)
-and a change of the push (up to ``max_force_offset_n``, turned into a depth along -z_t with
-the law's own K_z), added to the mission's setpoint in the target frame at
-``action_rate_hz`` and held over the 300 Hz control ticks in between. Why the setpoint:
-with fixed gains the closed loop stays eq. (6), a passive mass-spring-damper about the
-desired position, whatever the agent does, so a policy can move where and how hard the
-tool pushes but cannot destabilise the contact (time-varying K and C can pump energy into
-it); the push is already K_z times the depth (DESIGN section 2), so a depth offset is a
-force command; and a zero action is exactly the mission's own controller, the baseline a
-policy learns a residual to. The mission's HOLD force loop (``flight.impedance.force_tau_s``)
-keeps correcting the depth; set ``controller={'flight.impedance.force_tau_s': 0}`` to leave the
-force regulation to the agent.
+and a change of the push (``ImpedanceSetpoint.push_n``, up to ``max_force_offset_n``; the
+law holds it as a depth along -z_t with its own K_z), added to the mission's setpoint in
+the target frame at ``action_rate_hz`` and held over the 300 Hz control ticks in between.
+Why the setpoint: with fixed gains the closed loop stays eq. (6), a passive
+mass-spring-damper about the desired position, whatever the agent does, so a policy can
+move where and how hard the tool pushes but cannot destabilise the contact (time-varying K
+and C can pump energy into it); and a zero action is exactly the mission's own controller,
+the baseline a policy learns a residual to. In HOLD the law's trim
+(``flight.impedance.force_tau_s``) brings the measured push to the one asked for, the
+agent's change included; set ``controller={'flight.impedance.force_tau_s': 0}`` to leave
+the force regulation to the agent.
 
 **Observation** (Dict, float32, what the vehicle measures): ``error_t`` (6,) the impedance
-error e, e' of the noisy odometry against the setpoint in the target frame of the
-estimate; ``tip_t`` (3,) the tool tip in that frame (x, y along the wall from the POI,
-z off the surface); ``wrench`` (6,) the F/T reading (ee_link, N and N m); ``push_error_n``
-(1,) the measured push along the normal minus the setpoint; ``phase`` Discrete(5) (close,
+error e, e' of the noisy odometry against the reference the law tracks (the setpoint, the
+push's depth behind it) in the target frame of the estimate; ``tip_t`` (3,) the tool tip
+in that frame (x, y along the wall from the POI, z off the surface); ``wrench`` (6,) the
+F/T reading (ee_link, N and N m); ``push_error_n`` (1,) the measured push along the normal
+minus the setpoint; ``phase`` Discrete(5) (close,
 touch (with CONTACT's ``align`` pauses), press, hold, other); with ``camera=True`` also
 ``image`` (H, W, 3) uint8, the eye-in-hand camera at the end of the step.
 ``render_mode='rgb_array'`` renders that camera. An action that is not three finite
@@ -169,6 +170,7 @@ class ContactInspectionEnv(gym.Env):
         self.observation_space = spaces.Dict(obs)
         self.flight: Flight | None = None
         self._offset_t = np.zeros(3)
+        self._offset_push_n = 0.0
         self._setpoint: Any = None  # the controller's last setpoint (the action's offset in)
         self._frame: tuple[int, np.ndarray] | None = None   # (tick, rgb) of the last image
         self._info: dict[str, Any] = {}
@@ -212,9 +214,8 @@ class ContactInspectionEnv(gym.Env):
             raise ValueError(f'action {a.tolist()} is not finite')
         a = np.clip(a, -1.0, 1.0)
         cfg, flight = self.cfg, self.flight
-        k_z = flight.core.flight.impedance.gains(contact=True)[0][2]
-        self._offset_t = np.array([a[0] * cfg.max_offset_m, a[1] * cfg.max_offset_m,
-                                   -a[2] * cfg.max_force_offset_n / k_z])
+        self._offset_t = np.array([a[0] * cfg.max_offset_m, a[1] * cfg.max_offset_m, 0.0])
+        self._offset_push_n = float(a[2] * cfg.max_force_offset_n)
         reward, outcome = 0.0, None
         for _ in range(self.ticks_per_step):
             flight.step()
@@ -273,7 +274,7 @@ class ContactInspectionEnv(gym.Env):
                                    threads=self.cfg.detector_threads)
         self.flight = flight = Flight(scenario, config, plant_config=self.plant_config,
                                       vision=vision)
-        self._offset_t = np.zeros(3)
+        self._offset_t, self._offset_push_n = np.zeros(3), 0.0
         self._frame = self._setpoint = None
         flight.core.setpoint_hook = self._offset_setpoint
         flight.step()
@@ -291,7 +292,8 @@ class ContactInspectionEnv(gym.Env):
         """The controller's setpoint hook: the action's offset near the wall."""
         if setpoint.contact_gains and self._live.core.mission.mode in ACTING:
             setpoint = dataclasses.replace(setpoint,
-                                           lambda_d_t=setpoint.lambda_d_t + self._offset_t)
+                                           lambda_d_t=setpoint.lambda_d_t + self._offset_t,
+                                           push_n=setpoint.push_n + self._offset_push_n)
         self._setpoint = setpoint
         return setpoint
 
@@ -350,7 +352,9 @@ class ContactInspectionEnv(gym.Env):
         p_t = R.T @ (odom.p_map - origin)
         tip_t = R.T @ (odom.p_map + quat_to_matrix(odom.q_map_base)[:, 0]
                        * flight.vehicle.tool_tip_x_m - origin)
-        error = np.concatenate((p_t - sp.lambda_d_t, R.T @ odom.v_map - sp.dlambda_d_t))
+        # against the reference the law tracks: the push's depth behind the setpoint's
+        law = flight.core.flight.impedance
+        error = np.concatenate((p_t - law.lambda_d_t, R.T @ odom.v_map - law.dlambda_d_t))
         obs: dict[str, Any] = dict(
             error_t=np.clip(error, -ERROR_BOUND, ERROR_BOUND),
             tip_t=np.clip(tip_t, -LIMIT_M, LIMIT_M),
