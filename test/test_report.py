@@ -144,8 +144,10 @@ def test_failure_judges_the_recorded_run_on_the_truth_as_the_campaign_does():
     assert report.summarize(rec, TOOL_X)['failure'] is None
     rec, _ = synthetic_recording(steady, tip_offset=along_wall * rng.uniform(0.0105, 0.1))
     assert report.summarize(rec, TOOL_X)['failure']['reason'] == 'off_target'
-    rec, _ = synthetic_recording(steady + rng.choice([-1.0, 1.0]) * rng.uniform(0.11, 1.0),
-                                 tip_offset=np.zeros(3))
+    # off the setpoint by more than the bar (not off the steady push, which may lie on
+    # the other side of it)
+    off = np.full(N, 6.0 + rng.choice([-1.0, 1.0]) * rng.uniform(0.11, 1.0))
+    rec, _ = synthetic_recording(off, tip_offset=np.zeros(3))
     assert report.summarize(rec, TOOL_X)['failure']['reason'] == 'force_off_setpoint'
     # the force limit trips in HOLD at 1.0 s: not completed, whatever the touch measured
     base = controller_status(6.0)
