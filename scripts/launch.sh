@@ -2,7 +2,7 @@
 # Start the uav_tilt node graph in namespace /uav, each node its own process (DESIGN §6).
 #
 # usage: scripts/launch.sh [--scenario F] [--realtime] [--record DIR] [--foxglove]
-#          [--mission inspect | --mission plan --plan FILE] [--no-vision]
+#          [--mission inspect | --mission plan --plan FILE] [--no-vision] [--record-images P]
 #          [--target-source vision|ground_truth] [--vision-only] [--param NODE.NAME:=VALUE]...
 #
 # Lockstep unless --realtime. With --mission plan the controller runs the plan FILE, its site
@@ -24,6 +24,30 @@
 set -euo pipefail
 
 usage() { sed -n '4,6p' "${BASH_SOURCE[0]}" | sed 's/^# //'; }
+# --help: the usage, then each option on a line of its own (docs/running.md has the rest).
+help() {
+    usage
+    cat <<'EOF'
+
+Starts the uav_tilt node graph in namespace /uav, each node its own process; Ctrl-C stops
+every node. Exit 0 when every node stopped cleanly and the mission (if any) succeeded, 2
+when an option, the scenario or a node's parameters were refused, else 1.
+
+options:
+  --scenario FILE           the world (default: config/scenarios/default.yaml)
+  --realtime                pace the plant by the wall clock (default: lockstep)
+  --record DIR              record the run to DIR/recording.mcap (uav-tilt report DIR)
+  --record-images P         camera images kept: all, thin (6 a second), none (default: all)
+  --foxglove                also start the live view (ws://127.0.0.1:8765)
+  --mission inspect|plan    fly the mission at once, its log on stdout, and end with it
+  --plan FILE               with --mission plan: the inspection plan (YAML)
+  --no-vision               start no vision node (it runs elsewhere: --vision-only)
+  --target-source SOURCE    vision or ground_truth (default: config/controller.yaml's)
+  --vision-only             start vision alone (the companion computer's side)
+  --param NODE.NAME:=VALUE  a parameter of plant, controller, vision, recorder or foxglove
+  -h, --help                this help
+EOF
+}
 log() { echo "[launch] $*" >&2; }
 die() { log "$*"; usage >&2; exit 2; }
 
@@ -39,7 +63,7 @@ GRACE_S=${UAV_TILT_GRACE_S:-5}
 export UAV_TILT_GRACE_S=$GRACE_S
 
 scenario='' realtime=0 record='' mission='' plan='' foxglove=0 vision=1 target_source=''
-vision_only=0
+vision_only=0 record_images=''
 PARAMS=()
 # Parameters the script sets from its own options: a --param for one would split what the
 # nodes are told (the plant's scenario against the plan's site, say), so it is refused.
@@ -47,6 +71,7 @@ declare -A OWNED_BY=(
     [plant.scenario_file]=--scenario [foxglove.scenario_file]=--scenario
     [plant.mode]=--realtime [controller.autostart]=--mission [controller.plan_file]=--plan
     [controller.target_source]=--target-source [recorder.output]=--record
+    [recorder.images]=--record-images
     [plant.hold_until_recorded]=--record [controller.hold_until_recorded]=--record
     [plant.summary_file]='the script (its timing line at the end)'
 )
@@ -55,6 +80,11 @@ while (($#)); do
         --scenario) scenario=${2:-}; [[ -n $scenario ]] || die '--scenario needs a file'; shift 2 ;;
         --realtime) realtime=1; shift ;;
         --record) record=${2:-}; [[ -n $record ]] || die '--record needs a directory'; shift 2 ;;
+        --record-images)
+            record_images=${2:-}
+            [[ $record_images == all || $record_images == thin || $record_images == none ]] \
+                || die '--record-images: all, thin or none'
+            shift 2 ;;
         --mission)
             mission=${2:-}
             [[ $mission == inspect || $mission == plan ]] || die "--mission: 'inspect' or 'plan'"
@@ -75,11 +105,12 @@ while (($#)); do
             [[ -z $owner ]] || die "--param ${2%%:=*}: set by $owner"
             PARAMS+=("$2")
             shift 2 ;;
-        -h | --help) usage; exit 0 ;;
+        -h | --help) help; exit 0 ;;
         *) die "unknown argument: $1" ;;
     esac
 done
 
+[[ -z $record_images || -n $record ]] || die '--record-images goes with --record DIR'
 if [[ $mission == plan && -z $plan ]] || [[ -n $plan && $mission != plan ]]; then
     die '--mission plan and --plan FILE go together'
 fi
@@ -106,10 +137,12 @@ else
     PY=$(command -v python3) || die 'no .venv and no python3 on PATH'
 fi
 
-# The scenario is read here as well as by the plant, so that a missing or bad file is one
-# line and exit 2 before anything starts; its site (wall, target ids) is what --plan needs.
+# The scenario is read here as well as by the plant, so that a missing or bad file (or, for
+# --mission inspect, one that designates no target) is one line and exit 2 before anything
+# starts; its site (wall, target ids) is what --plan needs.
 if ((!vision_only)); then
-    site=$("$PY" -m uav_tilt_tools.runner.site_params "$scenario") || { usage >&2; exit 2; }
+    site=$("$PY" -m uav_tilt_tools.runner.site_params "$scenario" "$mission") \
+        || { usage >&2; exit 2; }
 fi
 # A folder that holds a bag (ours, or another tool's) is refused: it would be overwritten or
 # mixed, and the recorder would refuse it only once the graph is up.
@@ -165,10 +198,13 @@ trap 'stop_signal=1' INT TERM
 # shellcheck disable=SC2329  # invoked by the EXIT trap
 # The plant writes its timing (real-time factor, late commands, ...) here at exit.
 PLANT_SUMMARY=$(mktemp "${TMPDIR:-/tmp}/uav_tilt_plant.XXXXXX")
+# A node that refuses its parameters or files writes why to $REFUSED.<name> as well as to
+# stderr (UAV_TILT_REFUSAL_FILE, uav_tilt_common/ros_params.py): the last lines repeat it.
+REFUSED=$PLANT_SUMMARY.refused
 kill_all() {
     local p
     for p in "${!RUNNING[@]}"; do kill -s KILL -- "-$p" 2>/dev/null || true; done
-    rm -f "$PLANT_SUMMARY"
+    rm -f "$PLANT_SUMMARY" "$REFUSED".*
 }
 trap kill_all EXIT
 
@@ -181,7 +217,7 @@ start() {
     # Job control gives each node its own process group, so a terminal's Ctrl-C reaches
     # the nodes once (from here), and their SIGINT is not ignored as in background jobs.
     set -m
-    "${CMD[@]}" </dev/null &
+    UAV_TILT_REFUSAL_FILE=$REFUSED.$name "${CMD[@]}" </dev/null &
     set +m
     NAME_OF[$!]=$name
     RUNNING[$!]=1
@@ -197,6 +233,7 @@ if [[ -n $record ]]; then
     resolve recorder_node uav_tilt_tools.bag.recorder_node
     ros_args recorder
     CMD+=(-p "output:=$record")
+    [[ -z $record_images ]] || CMD+=(-p "images:=$record_images")
     start recorder
     # It listens once its file exists: wait for that (30 s at most), so that the plant's
     # first tick is recorded.
@@ -252,6 +289,7 @@ log "ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0} ROS_AUTOMATIC_DISCOVERY_RANGE=$ROS_AUTOMA
 
 failed=0
 mission_code=''
+stopped_by='a stop signal (Ctrl-C)'
 declare -A CODE_OF=()
 # Run until a signal, the end of the mission, or a node exits.
 while ((!stop_signal && ${#RUNNING[@]})); do
@@ -272,6 +310,7 @@ while ((!stop_signal && ${#RUNNING[@]})); do
         continue
     fi
     log "$name (pid $pid) exited with code $code: stopping the others"
+    stopped_by="$name exiting with code $code"
     failed=1
     break
 done
@@ -299,18 +338,38 @@ for pid in "${!RUNNING[@]}"; do
     unset "RUNNING[$pid]"
 done
 
-refused=0
+refused=()
 for pid in "${!NAME_OF[@]}"; do
+    name=${NAME_OF[$pid]}
     code=${CODE_OF[$pid]}
-    log "${NAME_OF[$pid]}: exit code $code"
+    log "$name: exit code $code"
     [[ $code == 0 ]] || failed=1
     # a node exits 2 when it refuses its parameters or files (DESIGN §6): so does the script
-    [[ $code != 2 || ${NAME_OF[$pid]} == mission_watch ]] || refused=1
+    if [[ $code == 2 && $name != mission_watch ]]; then
+        why=''
+        [[ ! -s $REFUSED.$name ]] || why=$(head -n 1 "$REFUSED.$name")
+        refused+=("$name${why:+: $why}")
+    fi
 done
 if [[ -s $PLANT_SUMMARY ]]; then log "plant timing: $(<"$PLANT_SUMMARY")"; fi
-if [[ -n $mission && $mission_code != 0 ]]; then
-    log 'mission did not succeed'
-    failed=1
+if ((${#refused[@]})); then
+    # nothing flew: the refusal is the news, and the last line
+    for line in "${refused[@]}"; do log "refused: $line"; done
+    exit 2
 fi
-((!refused)) || exit 2
+if [[ -n $mission ]]; then
+    if [[ -z $mission_code ]]; then
+        log "mission did not finish: stopped by $stopped_by"
+        failed=1
+    elif [[ $mission_code != 0 ]]; then
+        log 'mission did not succeed (its last [mission] lines say how it ended)'
+        failed=1
+    fi
+    if [[ -n $mission_code && -n $record && -s $record/recording.mcap ]]; then
+        # the summary's key numbers, by the recorded truth (uav-tilt report draws the plots)
+        "$PY" -m uav_tilt_tools.graph.run_summary "$record" || true
+    elif [[ -n $mission_code ]]; then
+        log 'the POI error against the truth, and the plots, need a recording: --record DIR'
+    fi
+fi
 exit "$failed"

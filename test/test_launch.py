@@ -5,6 +5,7 @@ import collections
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -19,6 +20,7 @@ from ros_graph import REPO, alive, children, status_values
 from uav_tilt_common import names, ros_qos
 from uav_tilt_sim.camera import CameraConfig
 from uav_tilt_tools.graph.mission_watch import MissionWatch
+from uav_tilt_vision.pipeline import VisionConfig
 
 pytestmark = pytest.mark.slow     # minutes of missions or graphs: handed out first
 
@@ -222,12 +224,40 @@ def test_a_recorded_mission_is_whole_and_scored_against_the_force_asked(tmp_path
     assert summary['force_rms_error_n'] <= 0.2
     assert summary['poi_error_m'] < 0.01 and summary['contact_lost'] == 0
     assert summary['failure'] is None      # the inspection bar, by the recorded truth
+    check_what_the_launch_said(text, summary)
     # in lockstep the controller answers each of the 300 Hz ticks: its rate on the wall
     # clock is the plant's real-time factor times 300, give or take the ticks lost
     assert summary['controller_rate_hz'] == pytest.approx(300 * summary['rtf'],
                                                           rel=LOST_SHARE + 0.05)
     print(f'recorded {duration_s:.2f} s of sim time ({len(set(clock))} of {ticks} ticks), '
           f'camera {counts} of {frames_published}; summary {summary}')
+
+
+def check_what_the_launch_said(text, summary):
+    """The log a user follows: the recorder's one line, a [mission] line per mode change
+    with its sim time, the task's outcome with its push, the verdict, and the recording's
+    key numbers as the report has them."""
+    lines = text.splitlines()
+    assert len([line for line in lines if 'recording ' in line and 'recorder' in line]) <= 2
+    mission = [line.split('] ', 1)[1] for line in lines if line.startswith('[mission] ')]
+    # "t =   27.51 s  HOLD", "t =   15.34 s  CONTACT (close)": the sim time it was entered
+    changes = [re.fullmatch(r't = +([\d.]+) s  ([A-Z_]+)( \(\w+\))?', line) for line in mission]
+    modes = [change.group(2) for change in changes if change]
+    for mode in ('TAKEOFF', 'APPROACH', 'CONTACT', 'HOLD', 'RETREAT', 'LAND', 'IDLE'):
+        assert mode in modes, mission
+    assert all(a != b for a, b in zip(modes, modes[1:])), mission   # one line per change
+    times = [float(line.split()[2]) for line in mission if line.startswith('t = ')]
+    assert times == sorted(times) and times[-1] > 10.0, mission
+    task = next(line for line in mission if 'task 1 of 1 (touch): ' in line)
+    push = re.search(r': ok; push ([\d.]+) N mean, [\d.]+ N RMS error of 4.0 N \(\d+ status', task)
+    assert push and abs(float(push.group(1)) - 4.0) < 0.2, task
+    assert re.fullmatch(r'mission ended at t = +[\d.]+ s: success; 1 of 1 tasks ok; '
+                        r'[\d.]+ s of sim time from the take-off', mission[-1]), mission
+    line = next(line for line in lines if line.startswith('[summary] '))
+    assert line.startswith(f"[summary] success; POI error {summary['poi_error_m'] * 1e3:.2f} "
+                           f"mm"), line
+    assert f"push {summary['force_mean_n']:.2f} N mean, {summary['force_rms_error_n']:.3f} N " \
+           f"RMS error of 4.0 N" in line and f"mission {summary['mission_time_s']:.1f} s" in line
 
 
 @pytest.mark.parametrize('args, words', [
@@ -262,13 +292,20 @@ def test_bad_arguments_start_nothing(tmp_path, args, words):
 
 def test_a_node_refusing_its_parameters_is_exit_2_and_a_param_wins(tmp_path):
     plan = os.path.join(REPO, 'config', 'plans', 'inspection.yaml')
+    scenario = os.path.join(REPO, 'config', 'scenarios', 'plan.yaml')
     result = subprocess.run(
-        [LAUNCH, '--no-vision', '--mission', 'plan', '--plan', plan,
+        [LAUNCH, '--no-vision', '--mission', 'plan', '--plan', plan, '--scenario', scenario,
          '--param', 'controller.site.wall_yaw_deg:=7.5',
          '--param', 'controller.contact_force:=-1.0'],
         cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert result.returncode == 2, result.stderr
-    assert 'contact_force' in result.stderr and 'Traceback' not in result.stderr
+    assert 'Traceback' not in result.stderr
+    # no mission flew: the last line says what was refused, and why (the node's own line)
+    fatal = next(line for line in result.stderr.splitlines() if line.startswith('[FATAL] '))
+    assert "'contact_force' = -1.0" in fatal, fatal
+    assert result.stderr.splitlines()[-1] == '[launch] refused: controller: ' + fatal[8:], \
+        result.stderr
+    assert 'did not succeed' not in result.stderr and '[mission]' not in result.stdout
     # The site the script takes from the scenario comes first, the --param last: rcl keeps
     # the last value given for a name.
     command = next(line for line in result.stderr.splitlines()
@@ -296,3 +333,44 @@ def test_mission_watch_ends_on_a_mission_it_never_heard_fly():
     assert watch.result is None
     watch.update({'mode': 'IDLE', 'success': False, 'task_outcomes': 'not_run'})
     assert watch.result is False
+
+
+@pytest.mark.parametrize('images', ['thin', 'none'])
+def test_a_recording_keeps_the_camera_images_its_profile_says(tmp_path, images):
+    """--record-images thin keeps the camera's frames at the detector's rate (every
+    detect_every-th, the colour and the depth of the same frames), none keeps no image, and
+    with no node taking the images the plant draws none; `uav-tilt report` reads both."""
+    run_dir = tmp_path / 'run'
+    log_path = tmp_path / 'launch.log'
+    with open(log_path, 'w') as log:
+        code = subprocess.run(
+            [LAUNCH, '--no-vision', '--mission', 'inspect', '--target-source', 'ground_truth',
+             '--record', str(run_dir), '--record-images', images,
+             '--param', 'controller.mission.contact.hold_time_s:=2.0'],
+            cwd=tmp_path, stdout=log, stderr=subprocess.STDOUT, timeout=400).returncode
+    text = log_path.read_text()
+    assert code == 0, text[-6000:]
+    counts = collections.Counter()
+    with open(run_dir / 'recording.mcap', 'rb') as stream:
+        for _, channel, _ in make_reader(stream).iter_messages(log_time_order=False):
+            counts[channel.topic] += 1
+    frames = counts['/uav/' + names.CAMERA_INFO]
+    color = counts['/uav/' + names.CAMERA_COLOR]
+    depth = counts['/uav/' + names.CAMERA_DEPTH]
+    timing = json.loads(text.split('plant timing: ', 1)[1].splitlines()[0])
+    if images == 'thin':
+        every = VisionConfig().detect_every
+        lost = int(LOST_SHARE * frames) + 1
+        # the first frame is drawn as the plant starts, maybe before the recorder listens
+        assert frames > 30 * 20 and timing['unwatched_frames'] <= 1, (counts, timing)
+        assert abs(color - math.ceil(frames / every)) <= lost, (color, frames)
+        assert abs(depth - color) <= lost, (color, depth)
+    else:
+        # not drawn: the frames due over the flight, counted, none published
+        assert (color, depth, frames) == (0, 0, 0), counts
+        assert timing['unwatched_frames'] == pytest.approx(timing['sim_time_s'] * 30, abs=2)
+    code, lines, summary = report(run_dir)
+    assert code == 0, lines
+    assert summary['failure'] is None and summary['hold_time_s'] > 1.9
+    print(f'{images}: {(run_dir / "recording.mcap").stat().st_size / 1e6:.1f} MB, '
+          f'{color} of {frames} frames')

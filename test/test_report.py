@@ -22,9 +22,10 @@ from uav_tilt_common.modes import Mode
 from uav_tilt_tools import cli
 from uav_tilt_tools.bag import reader as recording
 from uav_tilt_tools.bag.writer import McapBag
+from uav_tilt_tools.campaign import summary as campaign_summary
 from uav_tilt_tools.metrics import tasks as task_metrics
 from uav_tilt_tools.report import summary as report
-from uav_tilt_tools.report.plots import write_plots
+from uav_tilt_tools.report.plots import plot_vision, write_plots
 
 TOOL_X = VehicleParams().tool_tip_x_m
 DT = 1.0 / 300
@@ -508,3 +509,86 @@ def test_a_touch_completed_off_the_bar_is_no_success():
     short, within = results
     assert (short['success'], short['reason']) == (False, 'force_off_setpoint')
     assert (within['success'], within['reason']) == (True, '')
+
+
+def _completed_touch(target_id='', t_contact_s=(HOLD_FIRST, HOLD_LAST)):
+    return dict(index=0, kind='touch', target=target_id, force_n=6.0, success=True,
+                reason='', contact_lost=0, t_contact_s=list(t_contact_s),
+                normal_map=[-1.0, 0.0, 0.0])
+
+
+def test_a_completed_run_that_nothing_can_score_is_unscored(tmp_path, capsys):
+    """No designated target (no truth of it): the controller completed its touch, the
+    truth cannot say where it pressed. `uav-tilt report`, `uav-tilt fly` and the campaign
+    judge it by one rule (metrics.tasks): 'unscored', never a success, exit 1."""
+    rec, _ = synthetic_recording(np.full(N, 6.0), tip_offset=np.zeros(3), contact_lost=0)
+    assert report.summarize(rec, TOOL_X)['failure'] is None       # scored, and met
+    del rec[names.GROUND_TRUTH_TARGET]
+    summary = report.summarize(rec, TOOL_X)
+    assert summary['success'] is True and summary['poi_error_m'] is None
+    assert summary['failure'] == {'reason': 'unscored', 'mode': 'HOLD', 'phase': ''}
+    # the same with the recorded plan of one touch: the task says so too
+    rec[names.CONTROLLER_PLAN] = [(wall_ns(0.0), _plan_message([_completed_touch()]))]
+    summary = report.summarize(rec, TOOL_X)
+    assert summary['failure'] == {'reason': 'unscored', 'mode': 'HOLD', 'phase': ''}
+    assert (summary['tasks'][0]['success'], summary['tasks'][0]['reason']) == (False,
+                                                                               'unscored')
+    bag = open_bag(tmp_path / 'recording.mcap')
+    bag.add_topic('/uav/' + names.CONTROLLER_PLAN, 'std_msgs/msg/String')
+    with_plan = dict(TYPES, **{names.CONTROLLER_PLAN: 'std_msgs/msg/String'})
+    for log_ns, topic, msg in sorted(((log_ns, topic, msg) for topic in with_plan
+                                      for log_ns, msg in rec.get(topic, ())),
+                                     key=lambda item: item[0]):
+        write(bag, topic, msg, log_ns)
+    bag.close()
+    assert cli.main(['report', str(tmp_path)]) == 1
+    assert json.loads(capsys.readouterr().out)['failure']['reason'] == 'unscored'
+    # fly's and the campaign's runs: the tasks of the flight, without the target's truth
+    t = np.arange(N) * DT
+    normal = np.array([-1.0, 0.0, 0.0])
+    tasks = task_metrics.task_results([_completed_touch()], t, np.tile(POI, (N, 1)),
+                                      np.outer(np.full(N, 6.0), normal), {})
+    result = dict(success=True, contact_lost=0, failsafe_reason='', tasks=tasks,
+                  mode_history=[(0.0, 'IDLE')])
+    assert task_metrics.failure_of(result) == {'reason': 'unscored', 'mode': 'HOLD',
+                                               'phase': ''}
+    result['failure'] = task_metrics.failure_of(result)
+    campaign = campaign_summary.summarize(1, 0, 'vision', [result])
+    assert campaign['successes'] == 0 and campaign['failures'] == {'unscored in HOLD': 1}
+    # with the truth, the same flight is scored and met
+    scored = task_metrics.task_results(
+        [_completed_touch()], t, np.tile(POI, (N, 1)), np.outer(np.full(N, 6.0), normal),
+        {'': (POI, np.column_stack([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], normal]))})
+    assert task_metrics.failure_of(dict(result, tasks=scored)) is None
+
+
+def test_a_completed_slide_without_the_truth_is_unscored():
+    task = dict(index=0, kind='slide', force_n=5.0, success=True, reason='', contact_lost=0,
+                t_contact_s=[0.0, 1.0], points_map=[[WALL_X, 0.0, 1.0], [WALL_X, 0.0, 1.5]],
+                normal_map=[-1.0, 0.0, 0.0], length_m=0.5)
+    (slide,) = task_metrics.task_results([task], np.zeros(0), np.zeros((0, 3)),
+                                         np.zeros((0, 3)))
+    assert (slide['success'], slide['reason']) == (False, 'unscored')
+    assert task_metrics.failure_of(dict(success=True, tasks=[slide])) == {
+        'reason': 'unscored', 'mode': 'SLIDE', 'phase': ''}
+
+
+def test_the_vision_plot_shows_latency_on_the_wall_clock_as_the_summary_key():
+    """vision.png's latency is vision/status's (the wall clock of the vision node), the
+    numbers vision_latency_ms_p95 is the median of; its axis says which clock."""
+    rec = {names.TARGET_POSE: [], names.VISION_STATUS: []}
+    for k in range(31):
+        pose = PoseWithCovarianceStamped()
+        pose.header.stamp = stamp(k / 30)
+        rec[names.TARGET_POSE].append((int(k / 30 * 1e9), pose))
+    p95 = [20.0 + k % 3 for k in range(6)]
+    for k, value in enumerate(p95):
+        rec[names.VISION_STATUS].append((0, ros_msgs.diagnostics_msg(
+            'vision', dict(fps=30.0, latency_ms_p50=10.0, latency_ms_p95=value),
+            stamp(0.5 * k))))
+    fig = plot_vision(rec)
+    (_, ax) = fig.axes
+    (line,) = [a for a in ax.get_lines() if a.get_gid() == 'latency_p95']
+    assert list(line.get_ydata()) == p95
+    assert 'wall clock' in ax.get_ylabel()
+    assert report.summarize(rec, TOOL_X)['vision_latency_ms_p95'] == np.median(p95)

@@ -112,11 +112,21 @@ def test_hz_matches_the_rate_the_plant_reports(plant):
                                         if wall + offset_s >= end - window_s]
     assert rate == pytest.approx(IMU_HZ * (sim1 - sim0) / (wall1 - wall0), rel=0.1)
     assert re.search(r'min: \S+s max: \S+s std dev: \S+s window: \d+', out)
+    # which clock: the wall clock's rate so labelled, then the rate per second of sim time
+    # (the header stamps), which is the imu's own
+    assert re.search(r'average rate: \S+ Hz \(wall clock\)', out), out
+    sim_rate = float(re.search(r'rate per second of sim time: (\S+) Hz', out).group(1))
+    assert sim_rate == pytest.approx(IMU_HZ, rel=0.02)
 
 
 def test_unknown_topic_fails_with_a_message(plant):
     code, out = cli('topic', 'echo', 'no/such/topic', '--once', '--timeout', '1')
-    assert code == 1 and 'did not appear' in out
+    assert code == 1 and 'did not appear' in out and 'did you mean' not in out
+    # a misspelt name: the graph's nearest (given the time to discover the graph, which a
+    # monitor, niced below the graph it watches, takes longer to do on a busy machine)
+    code, out = cli('topic', 'hz', 'plant/stauts', '--timeout', '4')
+    assert code == 1 and out.strip() == ('topic /uav/plant/stauts did not appear within 4.0 s '
+                                         '(did you mean /uav/plant/status?)')
 
 
 @pytest.mark.parametrize('verb, code, words', [
@@ -144,3 +154,41 @@ def test_ctrl_c_ends_the_command_cleanly(plant, verb, code, words):
 def test_a_bad_option_value_is_refused(args):
     code, _ = cli('topic', *args)
     assert code == 2
+
+
+def test_a_monitor_reads_the_header_stamp_from_the_bytes_and_subscribes_best_effort():
+    """`topic hz` counts serialized messages (a 300 Hz topic is not deserialized) and takes
+    their header stamps from the CDR bytes; a monitor subscribes best effort to a volatile
+    topic, so that falling behind drops messages instead of holding a reliable publisher
+    of the lockstep loop, and reliably to a latched one (its last message)."""
+    import numpy as np
+    import rclpy
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import Imu
+    from std_msgs.msg import String
+
+    from uav_tilt_tools.graph import topic_tool, topics
+
+    rng = np.random.default_rng()
+    sec, nanosec = int(rng.integers(0, 2 ** 31)), int(rng.integers(0, 10 ** 9))
+    msg = Imu()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+    msg.header.frame_id = 'base_link'
+    assert topic_tool.starts_with_header(Imu) and not topic_tool.starts_with_header(String)
+    assert topic_tool.cdr_header_stamp_s(serialize_message(msg)) == sec + nanosec * 1e-9
+    assert topic_tool.cdr_header_stamp_s(b'\x00\x01\x00') is None
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node('monitor_qos_probe', context=context)
+        node.create_publisher(Imu, 'imu_probe', ros_qos.CONTROL)
+        node.create_publisher(String, 'latched_probe', ros_qos.LATCHED)
+        volatile = topics.monitor_qos(node, '/imu_probe', 10)
+        latched = topics.monitor_qos(node, '/latched_probe', 10)
+        assert volatile.reliability == ReliabilityPolicy.BEST_EFFORT
+        assert latched.reliability == ReliabilityPolicy.RELIABLE
+        assert latched.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

@@ -90,3 +90,32 @@ def ratio_up_to(high):
             raise argparse.ArgumentTypeError(f'{text!r} must be above 0 and at most {high}')
         return value
     return ratio
+
+
+def default_text(default: object) -> str:
+    """How an option's default reads in its help: a list as its values, space-separated."""
+    if isinstance(default, (list, tuple)):
+        return ' '.join(str(v) for v in default)
+    return str(default)
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Help of the `uav-tilt` commands: each option's help ends with its default, where it
+    has one (not the absent ones: None, a flag's False) and the help does not say it itself
+    (``%(default)s``); a description is printed as written."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ''
+        default = action.default
+        if (default is None or default is False or default is argparse.SUPPRESS
+                or action.nargs == 0 or '%(default)' in text):
+            return action.help
+        return f"{text} (default: {default_text(default).replace('%', '%%')})"
+
+
+def add_command(sub: 'argparse._SubParsersAction[argparse.ArgumentParser]', name: str,
+                help: str, description: str | None = None) -> argparse.ArgumentParser:
+    """A sub-command's parser with :class:`HelpFormatter`: its ``help`` (one line in the
+    parent's list) is its description too unless one is given."""
+    return sub.add_parser(name, help=help, description=description or help,
+                          formatter_class=HelpFormatter)

@@ -6,9 +6,10 @@ ROS parameters flattened with dots) and validates it; every failure is one
 :class:`ConfigError` line naming the parameter, its value and what is allowed.
 """
 import dataclasses
+import difflib
 import math
 import os
-from typing import TYPE_CHECKING, Any, Callable, Mapping, TypeGuard, TypeVar, cast
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, TypeGuard, TypeVar, cast
 
 import yaml
 
@@ -125,7 +126,7 @@ def from_dict(cls: type[ConfigT], data: Mapping[str, Any] | None, prefix: str = 
     names = {f.name for f in dataclasses.fields(cls)}
     for key in data:
         if key not in names:
-            raise ConfigError(unknown_message(cls, key, prefix))
+            raise ConfigError(unknown_message(cls, key, prefix, _first_path(key, data[key])))
     kwargs = {}
     for f in dataclasses.fields(cls):
         name = prefix + f.name
@@ -157,14 +158,55 @@ def moved_to(cls: type, name: str) -> tuple[str, bool] | None:
     return head + '.' + inner[0], False
 
 
-def unknown_message(cls: type, name: str, prefix: str = '') -> str:
+def unknown_message(cls: type, name: str, prefix: str = '', given: str | None = None) -> str:
     """The one line for a parameter ``prefix + name`` that config ``cls`` does not have:
-    where it lives now when it moved."""
+    where it lives now when it moved, else the close match of :func:`close_match` among the
+    class's dotted names, if any. ``given``: the dotted name as written, when ``name`` is
+    only its first part (a group the class lacks: ``mision.contact.hold_time_s``)."""
     moved = moved_to(cls, name)
     if moved is None:
-        return f"unknown parameter '{prefix}{name}'"
+        for written in dict.fromkeys((given or name, name)):
+            close = close_match(written, dotted_names(cls))
+            if close is not None:
+                return f"unknown parameter '{prefix}{written}' (did you mean '{prefix}{close}'?)"
+        return f"unknown parameter '{prefix}{given or name}'"
     new, absolute = moved
     return f"parameter '{prefix}{name}' has moved: it is now '{new if absolute else prefix + new}'"
+
+
+def close_match(name: str, candidates: Iterable[str]) -> str | None:
+    """The candidate that ``name`` is most likely a misspelling of (difflib, as for a node's
+    parameters, ``ros_params.check_overrides``), by the whole dotted name, else by its last
+    part when exactly one candidate's last part is close (``hold_time_s`` for
+    ``mission.contact.hold_time_s``); None when none is close."""
+    candidates = list(candidates)
+    found = difflib.get_close_matches(name, candidates, n=1)
+    if found:
+        return found[0]
+    by_leaf: dict[str, list[str]] = {}
+    for candidate in candidates:
+        by_leaf.setdefault(candidate.rsplit('.', 1)[-1], []).append(candidate)
+    leaf = difflib.get_close_matches(name.rsplit('.', 1)[-1], list(by_leaf), n=1, cutoff=0.8)
+    return by_leaf[leaf[0]][0] if leaf and len(by_leaf[leaf[0]]) == 1 else None
+
+
+def dotted_names(cls: type, prefix: str = '') -> list[str]:
+    """The dotted name of every field of config ``cls``, groups and leaves."""
+    out = []
+    for f in dataclasses.fields(cls):
+        out.append(prefix + f.name)
+        default = _default_of(f)
+        if _is_config(default):
+            out.extend(dotted_names(type(default), prefix + f.name + '.'))
+    return out
+
+
+def _first_path(key: str, value: Any) -> str:
+    """``key`` and, when ``value`` is a mapping (a group), the dotted path of its first leaf."""
+    while isinstance(value, dict) and len(value) == 1:
+        inner, value = next(iter(value.items()))
+        key = f'{key}.{inner}'
+    return key
 
 
 def unit_of(name: str, meta: Mapping[str, Any]) -> str:

@@ -32,6 +32,7 @@ GROUND_TRUTH_ODOM = 'ground_truth/odom'
 GROUND_TRUTH_TARGET = 'ground_truth/target'
 GROUND_TRUTH_TARGETS = 'ground_truth/targets'     # + '/<id>': each target of a scenario
 PLANT_STATUS = 'plant/status'
+PLANT_SCENARIO = 'plant/scenario'       # std_msgs/String (JSON), latched: the world flown
 CONTROLLER_STATUS = 'controller/status'
 CONTROLLER_PLAN = 'controller/plan'     # std_msgs/String (JSON), latched
 VISION_STATUS = 'vision/status'
@@ -62,11 +63,12 @@ TOPIC_TYPES = {
     GROUND_TRUTH_ODOM: 'nav_msgs/msg/Odometry',
     GROUND_TRUTH_TARGET: 'geometry_msgs/msg/PoseStamped',
     PLANT_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
+    PLANT_SCENARIO: 'std_msgs/msg/String',
     CONTROLLER_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
     CONTROLLER_PLAN: 'std_msgs/msg/String',
     VISION_STATUS: 'diagnostic_msgs/msg/DiagnosticArray',
 }
-LATCHED_TOPICS = (GROUND_TRUTH_TARGET, CONTROLLER_PLAN)
+LATCHED_TOPICS = (GROUND_TRUTH_TARGET, CONTROLLER_PLAN, PLANT_SCENARIO)
 # The recorder's node name, and the longest a recorded run (hold_until_recorded) waits for
 # it to listen before it starts anyway (wall clock).
 RECORDER_NODE = 'recorder'
@@ -74,8 +76,8 @@ RECORDER_WAIT_S = 30.0
 
 
 def is_latched(topic):
-    """Whether the contract's publisher of ``topic`` (relative name) latches it: the plan and
-    every target's ground truth."""
+    """Whether the contract's publisher of ``topic`` (relative name) latches it: the plan,
+    the scenario and every target's ground truth."""
     return topic in LATCHED_TOPICS or topic.startswith(GROUND_TRUTH_TARGETS + '/')
 
 

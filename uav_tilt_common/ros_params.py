@@ -2,6 +2,7 @@
 import array
 import difflib
 import math
+import os
 import re
 import signal
 import sys
@@ -200,6 +201,25 @@ def check_params_files(node: Node, files: Iterable[str]) -> None:
                               f"(any namespace) or '{fqn}'")
 
 
+# A file a refusal's line is added to, besides stderr: launch.sh names one per node, and
+# repeats the line at its end, after every node's shutdown lines.
+REFUSAL_FILE = 'UAV_TILT_REFUSAL_FILE'
+
+
+def refuse(line: str) -> int:
+    """Say why the node refuses to run (one line on stderr, and in the file that the
+    environment's :data:`REFUSAL_FILE` names, if any); returns its exit code, 2."""
+    print(f'[FATAL] {line}', file=sys.stderr, flush=True)
+    path = os.environ.get(REFUSAL_FILE)
+    if path:
+        try:
+            with open(path, 'a', encoding='utf-8') as stream:
+                stream.write(line + '\n')
+        except OSError:
+            pass        # the line is on stderr all the same
+    return 2
+
+
 def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Create the node, serve it (:func:`uav_tilt_common.ros_spin.spin_events`) until a
     stop signal, and shut down cleanly (the ros2/demos pattern).
@@ -216,16 +236,14 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) ->
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except _rclpy.RCLError as err:
         # a parameters file that is missing or no YAML: rcl's message, less its source lines
-        print(f"[FATAL] {re.sub(r', at /[^,]*', '', str(err))}", file=sys.stderr, flush=True)
-        return 2
+        return refuse(re.sub(r', at /[^,]*', '', str(err)))
     node = None
     code = 0
     try:
         node = node_factory()
         spin_events(node, stop)
     except ConfigError as err:
-        print(f'[FATAL] {err}', file=sys.stderr, flush=True)
-        code = 2
+        code = refuse(str(err))
     except (KeyboardInterrupt, ExternalShutdownException):
         pass        # a handler set before ours raised, or the context was shut down
     finally:

@@ -19,3 +19,11 @@ def recorder_listens(node, publisher):
     compatible = sum(qos_check_compatible(offered, info.qos_profile)[0]
                      != QoSCompatibility.ERROR for info in infos)
     return recorder and publisher.get_subscription_count() >= compatible
+
+
+def recorder_subscribes(node, publisher):
+    """Whether the graph lists a subscription of the recorder to ``publisher``'s topic: the
+    recorder leaves some out (its `exclude`, its `images` profile), and a tick waits only
+    for what it records."""
+    return any(info.node_name == names.RECORDER_NODE
+               for info in node.get_subscriptions_info_by_topic(publisher.topic_name))

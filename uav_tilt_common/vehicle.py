@@ -4,7 +4,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from uav_tilt_common.config import param
+from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.pose import Pose
 
 # Optical axes (x right, y down, z forward) in FLU for a camera looking along +x_FLU.
@@ -50,3 +50,25 @@ class VehicleParams:
 
 
 GRAVITY = 9.80665
+
+
+def check_vehicle(vehicle: VehicleParams) -> None:
+    """ConfigError for a vehicle no plant builds (:func:`check_body`) or whose weight is more
+    than its four rotors lift (``f_max_n`` each)."""
+    check_body(vehicle)
+    lift_kg = 4 * vehicle.f_max_n / GRAVITY
+    if vehicle.mass_kg >= lift_kg:
+        raise ConfigError(f"parameter 'vehicle.mass_kg' = {vehicle.mass_kg!r} is more than "
+                          f"its four rotors lift (4 vehicle.f_max_n = "
+                          f"{4 * vehicle.f_max_n:g} N: {lift_kg:.3g} kg)")
+
+
+def check_body(vehicle: VehicleParams) -> None:
+    """ConfigError for a vehicle whose hub (the mass less the two arms and the tool) would
+    be a tenth of the mass or less."""
+    rest_kg = 2 * vehicle.arm_mass_kg + vehicle.tool_mass_kg
+    if vehicle.mass_kg - rest_kg <= 0.1 * vehicle.mass_kg:
+        raise ConfigError(f"parameter 'vehicle.mass_kg' = {vehicle.mass_kg!r} leaves the hub "
+                          f"no more than a tenth of it after the arms and the tool "
+                          f"(2 vehicle.arm_mass_kg + vehicle.tool_mass_kg = {rest_kg:g} kg): "
+                          f"it must be more than {rest_kg / 0.9:.3g} kg")

@@ -85,8 +85,9 @@ def plan_of(cfg: ControllerConfig, vehicle: VehicleParams | None = None) -> list
                           f"the one-touch inspection; a plan file runs with 'plan'")
     m = cfg.mission
     forces = force_range_n(cfg, vehicle or VehicleParams())
+    # the push of the one-touch inspection, and the one status reports before a plan's
+    check_force("parameter 'contact_force'", cfg.contact_force, forces)
     if not cfg.plan_file:
-        check_force("parameter 'contact_force'", cfg.contact_force, forces)
         return one_touch_plan(cfg.site.check(), cfg.contact_force, m.contact.hold_time_s)
     return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, forces,
                      m.lowest_hover_m(), m.slide.path_tolerance_m)

@@ -20,34 +20,50 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from uav_tilt_common.config import ConfigError, from_dict, param, read_yaml
+from uav_tilt_common.config import ConfigError, close_match, from_dict, param, read_yaml
 from uav_tilt_common.targets import HINT_ERROR_M
 from uav_tilt_control.site import SiteConfig
 
 UV_RANGE_M = 1000.0
 # (low, high, what sets them): the open range a push must lie in, see check_force
 ForceRange = tuple[float, float, str]
+# the range of a task's force_n, from the mission's config (check_force)
+FORCE_RANGE = ('more than mission.contact.threshold_n, less than '
+               'mission.failsafe.force_limit_n and, without '
+               'flight.impedance.contact_feedforward, less than the most the vehicle pushes: '
+               'vehicle.mass_kg x flight.impedance.accel_limit_mps2')
 
 
 @dataclasses.dataclass
 class TouchTask:
     """Push a target: its id, roughly where it is on the wall, the push and how long."""
 
-    target: str = param('')
-    near_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
-    force_n: float = param(5.0)     # range: check_force, from the mission's config
-    hold_s: float = param(5.0, hi=600.0)    # more than 0: see _resolve
+    target: str = param('', doc="the id of one of the scenario's targets (site.target_ids)")
+    near_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float,
+                            doc=f'(u, v): roughly where the target is on the wall, good to '
+                                f'{HINT_ERROR_M:g} m along each axis; the detection of its '
+                                f'class nearest it is pushed')
+    force_n: float = param(5.0, doc=f'the push along the wall\'s normal over the hold; '
+                                    f'{FORCE_RANGE}')
+    hold_s: float = param(5.0, hi=600.0,      # more than 0: see _resolve
+                          doc='how long the push is held, and scored; more than 0')
 
 
 @dataclasses.dataclass
 class SlideTask:
     """Slide the tool tip along a polyline on the wall, pushing with ``force_n``."""
 
-    from_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
-    via_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, item_length=2)
-    to_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float)
-    speed_m_s: float = param(0.1, lo=0.005, hi=0.5)
-    force_n: float = param(5.0)     # range: check_force, from the mission's config
+    from_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float,
+                            doc='(u, v): where the tool touches down and the line begins')
+    via_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, item_length=2,
+                           doc='the points (u, v) the line passes through, in order')
+    to_uv_m: list = param([], lo=-UV_RANGE_M, hi=UV_RANGE_M, items=float,
+                          doc='(u, v): where the line ends and the tool lifts off')
+    speed_m_s: float = param(0.1, lo=0.005, hi=0.5,
+                             doc='along the line (minimum-jerk speed-up and slow-down at each '
+                                 'vertex)')
+    force_n: float = param(5.0, doc=f"the push along the wall's normal while sliding; "
+                                    f"{FORCE_RANGE}")
 
     def points_uv(self) -> list[list[float]]:
         """The polyline's vertices, from first to last."""
@@ -226,8 +242,11 @@ def _resolve(i: int, entry: Any, site: SiteConfig, force_range_n: ForceRange,
              lowest_m: float | None, tolerance_m: float | None) -> Task:
     where = f'tasks[{i}]'
     if not isinstance(entry, dict) or len(entry) != 1 or next(iter(entry)) not in KINDS:
+        close = close_match(str(next(iter(entry))), KINDS) \
+            if isinstance(entry, dict) and len(entry) == 1 else None
         raise ConfigError(f"{where} = {entry!r} must be one of "
-                          f"{', '.join(f'{{{k}: {{...}}}}' for k in KINDS)}")
+                          f"{', '.join(f'{{{k}: {{...}}}}' for k in KINDS)}"
+                          + (f" (did you mean '{close}'?)" if close else ''))
     kind, body = next(iter(entry.items()))
     task: TouchTask | SlideTask = from_dict(KINDS[kind], body, f'{where}.{kind}.')
     where = f'{where} ({kind})'

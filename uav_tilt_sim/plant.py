@@ -329,3 +329,9 @@ class Plant:
         rgb, depth, seg = cam_mod.render_with(renderer, self.scene, p_cam, R_map_cam,
                                               lighting, segmentation)
         return rgb, self.sensors.depth(depth), seg
+
+    def skip_frame(self):
+        """A frame not drawn (no one takes it): the depth noise draws what the frame would
+        have drawn, so that the frames drawn afterwards carry the noise they would have."""
+        cam = self.config.camera
+        self.sensors.skip_depth((cam.height, cam.width))

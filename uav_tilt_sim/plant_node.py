@@ -27,17 +27,19 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
+from std_msgs.msg import String
 
 from uav_tilt_common import cdr, names, ros_msgs, ros_qos
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.rate_limit import RejectCounter
 from uav_tilt_common.ros_params import declare_config, run_node
-from uav_tilt_common.ros_recorder import recorder_listens
+from uav_tilt_common.ros_recorder import recorder_listens, recorder_subscribes
 from uav_tilt_common.state import ActuatorCommand
 from uav_tilt_sim.camera_process import CameraProcess
 from uav_tilt_sim.command_check import check_command
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
+from uav_tilt_sim.world_json import world_json
 
 # A tick unanswered this long is sent again, and again as often: before the first command for
 # a controller that joins late, after it for a message lost to a stalled process.
@@ -66,7 +68,8 @@ class PlantNodeConfig(PlantCoreConfig):
                                       doc='wall time to wait for a command before failsafe')
     timeout_failsafe: str = param('cut_thrust', choices=('cut_thrust', 'hold_last'),
                                   doc='what a lockstep timeout applies')
-    camera_enabled: bool = param(True, doc='render and publish the RGB-D camera')
+    camera_enabled: bool = param(True, doc='render and publish the RGB-D camera (a frame is '
+                                 'drawn only while a camera image topic has a subscriber)')
     camera_process: bool = param(
         True, doc='realtime: draw the camera in a process of its own, so that a frame (2-3 ms '
         'on a CPU) does not delay the tick it belongs to; lockstep draws it on the tick')
@@ -119,13 +122,17 @@ class PlantNode(Node):
                                               ros_qos.CAMERA_PUB)
         self.pub_status = self.create_publisher(DiagnosticArray, names.PLANT_STATUS,
                                                 ros_qos.STATUS)
+        self.pub_scenario = self.create_publisher(String, names.PLANT_SCENARIO,
+                                                  ros_qos.LATCHED)
+        self.pub_scenario.publish(String(data=world_json(scenario, self.plant.world)))
         ros_qos.quiet_subscription(self, JointState, names.ACTUATORS_CMD, self.on_command, q,
                                    raw=True)
 
         self.rejects = RejectCounter()
         self.stats = dict(lockstep_waits=0, lockstep_timeouts=0, resent_ticks=0,
                           late_commands=0, repeated_commands=0, clamped_commands=0,
-                          commands=0, dropped_ticks=0, skipped_frames=0)
+                          commands=0, dropped_ticks=0, skipped_frames=0,
+                          unwatched_frames=0)
         self.answered_tick = -1     # lockstep: the last tick a command stepped
         self.waiting = False            # lockstep: waiting for the command of this tick
         self.synced = False             # lockstep: a command has arrived since the last timeout
@@ -230,7 +237,9 @@ class PlantNode(Node):
         pubs = [self.pub_clock, self.pub_imu, self.pub_odom, self.pub_wrench, self.pub_act,
                 self.pub_gt_odom]
         if self.cfg.camera_enabled:
-            pubs += [self.pub_rgb, self.pub_depth, self.pub_info]
+            # the images only where the recorder takes them (its `images` profile: none)
+            pubs += [self.pub_info] + [pub for pub in (self.pub_rgb, self.pub_depth)
+                                       if recorder_subscribes(self, pub)]
         if all(recorder_listens(self, pub) for pub in pubs):
             return True
         if time.monotonic() - self.wall_t0 < names.RECORDER_WAIT_S:
@@ -333,11 +342,23 @@ class PlantNode(Node):
         self.waiting = self.cfg.mode == 'lockstep' and (self.synced or not self.ever_commanded)
         self.wait_started = self.resent_at = time.monotonic()
         if self.cfg.camera_enabled and self.plant.tick % self.camera_every == 0:
-            if self.camera is None:
+            if not self._camera_wanted():
+                # drawn for no one: the depth noise goes on as if it had been, so that the
+                # frames a subscriber gets later are the ones it would have got
+                if self.camera is None:
+                    self.plant.skip_frame()
+                self.stats['unwatched_frames'] += 1
+            elif self.camera is None:
                 rgb, depth, _ = self.plant.render()
                 self._publish_frame(self.plant.t_s, rgb, depth)
             elif not self.camera.request(self.plant.t_s, self.plant.render_state()):
                 self.stats['skipped_frames'] += 1   # the last one is still being drawn
+
+    def _camera_wanted(self):
+        """Whether a camera image topic has a subscriber (vision, here or on another host, a
+        recorder that takes images, a viewer): a frame no one takes is not drawn."""
+        return bool(self.pub_rgb.get_subscription_count()
+                    or self.pub_depth.get_subscription_count())
 
     def _start_camera_process(self, scenario):
         try:

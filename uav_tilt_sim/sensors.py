@@ -70,3 +70,8 @@ class SensorModel:
             noisy *= np.float32(std)
             noisy += depth_m
         return np.where(np.isfinite(depth_m), noisy, depth_m)
+
+    def skip_depth(self, shape: tuple[int, int]) -> None:
+        """Draw what :meth:`depth` draws for an image of ``shape``, and drop it."""
+        if self.noise.depth_m > 0.0:
+            self.rngs['depth'].standard_normal(shape, dtype=np.float32)

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uav_tilt_common.geometry import Vector
-from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_common.vehicle import VehicleParams, check_body
 from uav_tilt_sim.bullet import pybullet as p
 from uav_tilt_sim.visuals import BOX, CYLINDER, SPHERE, Scene, Visual, pybullet_shape
 
@@ -45,12 +45,11 @@ def create_vehicle(client: int, vehicle: VehicleParams, position_m: Vector, yaw_
 
     ``vehicle`` is a VehicleParams; mass/inertia scales model a plant that differs from it.
     """
+    check_body(vehicle)         # one line for a hub left too light (a scale keeps ratios)
     mass = vehicle.mass_kg * mass_scale
     m_arm = vehicle.arm_mass_kg * mass_scale
     m_tool = vehicle.tool_mass_kg * mass_scale
     m_hub = mass - 2 * m_arm - m_tool
-    if m_hub <= 0.1 * mass:
-        raise ValueError('arm and tool masses leave too little mass for the hub')
     tool_len = vehicle.tool_tip_x_m - TOOL_ROOT_X_M
     tool_com_x = TOOL_ROOT_X_M + tool_len / 2.0
     # Counterweight: the hub's centre of mass sits behind so the whole CoM is at the origin.

@@ -31,6 +31,7 @@ class ObjectInstance:
     centre_map: np.ndarray      # centre of its front face
     target: bool
     id: str = ''
+    poi_map: np.ndarray | None = None   # a target's point of interest on its face
 
 
 @dataclasses.dataclass
@@ -91,6 +92,7 @@ def build_world(client: int, scenario: Scenario, texture_rng: np.random.Generato
         if cfg.target:
             du, dv = (np.asarray(textures.POI_UV[cfg.cls]) - 0.5) * textures.OBJECT_SIZE_M
             poi = obj.centre_map + R[:, 0] * du - R[:, 1] * dv
+            obj.poi_map = poi
             if info.target_poi_map is None:
                 info.target_poi_map, info.R_map_target = poi, R.copy()
             if cfg.id:

@@ -1,8 +1,10 @@
 """The `uav-tilt` command line (DESIGN section 6).
 
 Each sub-command lives in its own module exposing ``register(subparsers)``, which adds
-its parser and sets ``func`` (args -> exit code). This list is the only place that names
-them: nothing else imports a command module.
+its parser (``cli_args.add_command``: every option's help shows its default) and sets
+``func`` (args -> exit code); a command that parses its own arguments sets ``full_parser``,
+a function returning that parser, so that its help can be checked as the others'. This
+list is the only place that names them: nothing else imports a command module.
 """
 import argparse
 import importlib
@@ -10,7 +12,7 @@ import signal
 import sys
 import types
 
-from uav_tilt_common.cli_args import INTERRUPTED
+from uav_tilt_common.cli_args import INTERRUPTED, HelpFormatter
 
 COMMAND_MODULES = (
     'uav_tilt_tools.commands.bench',
@@ -24,9 +26,11 @@ COMMAND_MODULES = (
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every sub-command."""
-    parser = argparse.ArgumentParser(prog='uav-tilt', description=__doc__.splitlines()[0]
-                                     if __doc__ else None)
-    sub = parser.add_subparsers(dest='command', required=True)
+    parser = argparse.ArgumentParser(
+        prog='uav-tilt', formatter_class=HelpFormatter,
+        description='The uav_tilt command line: fly, campaign, report, topic, bench, vision.',
+        epilog="`uav-tilt COMMAND --help` shows a command's options and their defaults.")
+    sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser

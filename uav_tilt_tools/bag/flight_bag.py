@@ -5,8 +5,11 @@ tick it serializes, with the rclpy message classes and the nodes' own conversion
 (:mod:`uav_tilt_common.ros_msgs`), what the plant, controller and vision nodes would have
 published on the same topics (namespace ``/uav``, ``/clock``) with the same types and
 stamps, into an :class:`uav_tilt_tools.bag.writer.McapBag`; ``uav-tilt report`` reads it like
-a recording of the graph. Log times are the wall clock of the in-process run. Not written:
-the camera images (about 0.3 MB a frame), which no report reads, and the services.
+a recording of the graph. Log times are the wall clock of the in-process run. The camera
+images (about 0.3 MB a frame, which no report reads) as its ``images`` profile says
+(:mod:`uav_tilt_tools.bag.images`: none by default); without vision in the loop a profile
+that keeps them renders the camera at its rate for the recording alone. Not written: the
+services.
 """
 import json
 import time
@@ -24,6 +27,8 @@ from uav_tilt_common.modes import WAITING_FOR_SENSORS
 from uav_tilt_common.state import ActuatorCommand
 from uav_tilt_control.controller_core import ControllerConfig
 from uav_tilt_sim.plant import TickSensors
+from uav_tilt_sim.world_json import world_json
+from uav_tilt_tools.bag import images as image_profile
 from uav_tilt_tools.bag.writer import McapBag
 from uav_tilt_tools.graph.topics import contract_offer
 from uav_tilt_tools.runner.inprocess import Flight
@@ -38,10 +43,12 @@ STATUS_HZ = 2.0                 # plant_node's and vision_node's
 TYPES = {topic: names.TOPIC_TYPES[topic] for topic in (
     names.CLOCK, names.IMU, names.ODOM, names.EE_WRENCH, names.ACTUATORS_CMD,
     names.ACTUATORS_STATE, names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
-    names.PLANT_STATUS, names.CONTROLLER_STATUS, names.CONTROLLER_PLAN)}
+    names.PLANT_STATUS, names.PLANT_SCENARIO, names.CONTROLLER_STATUS, names.CONTROLLER_PLAN)}
 VISION_TYPES = {topic: names.TOPIC_TYPES[topic] for topic in (
     names.CAMERA_INFO, names.TARGET_CANDIDATES, names.TARGET_POSE, names.VISION_PLANES,
     names.VISION_STATUS)}
+CAMERA_TYPES = {topic: names.TOPIC_TYPES[topic] for topic in (
+    names.CAMERA_COLOR, names.CAMERA_DEPTH, names.CAMERA_INFO)}
 
 
 def absolute(topic: str, namespace: str = names.NAMESPACE) -> str:
@@ -53,15 +60,22 @@ class FlightBag:
     """Per-tick recorder of a Flight into one MCAP file; call :meth:`close` at the end."""
 
     def __init__(self, path: str, controller_config: ControllerConfig, camera_config: Any,
-                 vision: 'CameraVision | None' = None, own_folder: bool = False) -> None:
+                 vision: 'CameraVision | None' = None, own_folder: bool = False,
+                 images: str = 'none') -> None:
         """``vision``: the flight's CameraVision (its frames give target/* and the camera
         info), or None when the target comes from ground truth; ``own_folder``: the file's
-        folder is the recording's (:class:`McapBag`)."""
+        folder is the recording's (:class:`McapBag`); ``images``: the camera images kept,
+        ``all``, ``thin`` or ``none`` (:mod:`uav_tilt_tools.bag.images`)."""
+        if images not in image_profile.PROFILES:
+            raise ValueError(f'images {images!r}: one of {image_profile.PROFILES}')
         self.bag = McapBag(path, own_folder=own_folder)
         self.config = controller_config
         self.camera = camera_config
         self.vision = vision
-        types = dict(TYPES, **(VISION_TYPES if vision is not None else {}))
+        self.images = images
+        self.thinning = image_profile.Thinning()
+        types = {**TYPES, **(VISION_TYPES if vision is not None else {}),
+                 **(CAMERA_TYPES if images != 'none' else {})}
         for topic, type_name in types.items():
             self.bag.add_topic(absolute(topic), type_name, [contract_offer(topic)])
         self._flight: Flight | None = None
@@ -95,9 +109,14 @@ class FlightBag:
         self._write(names.ACTUATORS_CMD, ros_msgs.actuator_msg(
             command.thrusts_n, (command.alpha_rad, command.beta_rad), stamp), now)
         self._saturated_ticks += int(flight.status.get('saturated', False))
+        ticks_per_s = 1.0 / plant.dt_tick
         if self.vision is not None:
             self._write_frame(self.vision)
-        ticks_per_s = 1.0 / plant.dt_tick
+        elif self.images != 'none' \
+                and plant.tick % max(1, round(ticks_per_s / self.camera.rate_hz)) == 0:
+            # the camera drawn for the recording alone, as the plant draws it for one
+            rgb, depth, _ = plant.render()
+            self._write_images(sensors.t_s, rgb, depth, now)
         if plant.tick % max(1, round(ticks_per_s / CONTROLLER_STATUS_HZ)) == 0:
             self._write_controller_status(flight, now)
         if plant.tick % max(1, round(ticks_per_s / STATUS_HZ)) == 0:
@@ -115,7 +134,9 @@ class FlightBag:
 
     # --- what each node would publish ------------------------------------------------
     def _write_targets(self, flight: Flight, now: int) -> None:
-        """Each target's ground truth, as the plant latches it once."""
+        """The world and each target's ground truth, as the plant latches them once."""
+        self._write(names.PLANT_SCENARIO, String(data=world_json(flight.plant.scenario,
+                                                                 flight.plant.world)), now)
         for target_id, (poi_map, R_map_target) in flight.plant.world.truth_targets().items():
             topic = names.ground_truth_target(target_id)
             if target_id:
@@ -131,16 +152,32 @@ class FlightBag:
         if frame is None or frame.stamp_s == self._frame_stamp:
             return
         from uav_tilt_vision.vision_node import pose_msg    # torch: only with vision
-        t_s, result, rendered_ns, processed_ns = frame
+        t_s, result, processed_ns = frame.stamp_s, frame.result, frame.processed_ns
         self._frame_stamp = t_s
         stamp = ros_msgs.to_stamp(t_s)
-        self._write(names.CAMERA_INFO, ros_msgs.camera_info_msg(self.camera, stamp), rendered_ns)
+        if self.images != 'none' and frame.rgb is not None:
+            self._write_images(t_s, frame.rgb, frame.depth, frame.rendered_ns)
+        else:
+            self._write(names.CAMERA_INFO, ros_msgs.camera_info_msg(self.camera, stamp),
+                        frame.rendered_ns)
         self._write(names.TARGET_CANDIDATES, ros_msgs.candidates_msg(result.candidates, stamp),
                     processed_ns)
         self._write(names.TARGET_POSE, pose_msg(result, stamp), processed_ns)
         if result.planes is not None:
             self._write(names.VISION_PLANES, ros_msgs.planes_msg(result.planes, stamp),
                         processed_ns)
+
+    def _write_images(self, t_s: float, rgb: Any, depth: Any, log_ns: int) -> None:
+        """A camera frame as the plant publishes it (the images, then camera_info), the
+        images as the profile keeps them."""
+        stamp = ros_msgs.to_stamp(t_s)
+        stamp_ns = ros_msgs.stamp_ns(stamp)
+        if self.images == 'all' or self.thinning.keep(stamp_ns):
+            self.bag.write(absolute(names.CAMERA_COLOR), ros_msgs.image_cdr(rgb, stamp_ns),
+                           log_ns)
+            self.bag.write(absolute(names.CAMERA_DEPTH), ros_msgs.image_cdr(depth, stamp_ns),
+                           log_ns)
+        self._write(names.CAMERA_INFO, ros_msgs.camera_info_msg(self.camera, stamp), log_ns)
 
     def _write_controller_status(self, flight: Flight, now: int, final: bool = False) -> None:
         """controller/status as controller_node's, its loop rate over the wall clock since

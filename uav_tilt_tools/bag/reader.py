@@ -36,7 +36,8 @@ Pose3 = tuple[np.ndarray, np.ndarray]
 REPORT_TOPICS = (names.GROUND_TRUTH_ODOM, names.GROUND_TRUTH_TARGET,
                  names.EE_WRENCH, names.ACTUATORS_STATE, names.ACTUATORS_CMD,
                  names.CONTROLLER_STATUS, names.VISION_STATUS, names.PLANT_STATUS,
-                 names.TARGET_POSE, names.CAMERA_INFO, names.CONTROLLER_PLAN)
+                 names.TARGET_POSE, names.CAMERA_INFO, names.CONTROLLER_PLAN,
+                 names.PLANT_SCENARIO)
 # ... and every topic under these (each target's ground truth, by its id)
 REPORT_PREFIXES = (names.GROUND_TRUTH_TARGETS + '/',)
 # What reading a file that ends early may raise at its torn tail (OSError: a seek before
@@ -112,18 +113,20 @@ def recording_file(run: str) -> str:
 
 def load_recording(run: str, namespace: str = names.NAMESPACE,
                    topics: Iterable[str] = REPORT_TOPICS, notes: list[str] | None = None,
-                   prefixes: Iterable[str] = REPORT_PREFIXES) -> Recording:
+                   prefixes: Iterable[str] = REPORT_PREFIXES,
+                   progress: Callable[[int, int], None] | None = None) -> Recording:
     """The recording of ``topics`` and of the topics under ``prefixes`` in the MCAP file of
     ``run`` (:func:`recording_file`; NotMcap for a file that is no MCAP).
 
     A file without its summary (the recorder was killed) is read up to its last complete
-    chunk; one line about it goes to ``notes`` (a list) when given.
+    chunk; one line about it goes to ``notes`` (a list) when given. ``progress(read,
+    size)``, when given, is told the bytes read so far of the file's size as it goes.
     """
     path = recording_file(run)
     prefix = namespace.rstrip('/') + '/'
     absolute = {t if t.startswith('/') else prefix + t: t for t in topics}
     rec: Recording = {}
-    complete, count = _read_mcap(path, absolute, (prefix, tuple(prefixes)), rec)
+    complete, count = _read_mcap(path, absolute, (prefix, tuple(prefixes)), rec, progress)
     if not complete and notes is not None:
         notes.append(f'{os.path.basename(path)} is incomplete (no footer: the recorder did '
                      f'not finish); read {count} messages up to its last complete chunk')
@@ -131,15 +134,17 @@ def load_recording(run: str, namespace: str = names.NAMESPACE,
 
 
 def _read_mcap(path: str, absolute: dict[str, str], under: tuple[str, tuple[str, ...]],
-               rec: Recording) -> tuple[bool, int]:
+               rec: Recording, progress: Callable[[int, int], None] | None = None
+               ) -> tuple[bool, int]:
     """Add the messages of one file to ``rec``: those on the topics of ``absolute``
     (absolute name -> recording name) and, ``under`` = (namespace prefix, relative
     prefixes), those on the namespace's topics under the prefixes. Returns (complete,
     messages read)."""
     namespace, prefixes = under
-    count = 0
+    count = seen = 0
     decoders: dict[int, Callable[[bytes], Any]] = {}
     factory = DecoderFactory()
+    size = os.path.getsize(path)
     with open(path, 'rb') as stream:
         # a killed recorder's file has its start and not its end: a file without the start
         # would otherwise read as an empty, torn recording
@@ -166,6 +171,9 @@ def _read_mcap(path: str, absolute: dict[str, str], under: tuple[str, tuple[str,
                 if complete:
                     raise
                 break           # the chunk being written when the recorder died
+            seen += 1
+            if progress is not None and seen % 1000 == 0:
+                progress(stream.tell(), size)
             name = absolute.get(channel.topic)
             if name is None:
                 relative = channel.topic[len(namespace):]
@@ -227,6 +235,13 @@ def plan_tasks(rec: Recording) -> list[dict[str, Any]] | None:
     """The task entries of the last controller/plan (its JSON), or None."""
     msgs = rec.get(names.CONTROLLER_PLAN)
     return json.loads(msgs[-1][1].data)['tasks'] if msgs else None
+
+
+def world(rec: Recording) -> dict[str, Any] | None:
+    """The world the plant flew (plant/scenario's JSON, :mod:`uav_tilt_sim.world_json`:
+    ``scenario``, ``wall``, ``objects``), or None when it was not recorded."""
+    msgs = rec.get(names.PLANT_SCENARIO)
+    return json.loads(msgs[-1][1].data) if msgs else None
 
 
 def wrench_series(rec: Recording, tool_tip_x_m: float

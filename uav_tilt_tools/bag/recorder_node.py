@@ -27,6 +27,7 @@ from rclpy.node import Node
 from uav_tilt_common import names
 from uav_tilt_common.config import param
 from uav_tilt_common.ros_params import declare_config, run_node
+from uav_tilt_tools.bag import images as image_profile
 from uav_tilt_tools.bag.folder import RECORDING_FILE, not_recordable, recording_folder
 from uav_tilt_tools.bag.writer import McapBag
 from uav_tilt_tools.graph import topics
@@ -44,6 +45,11 @@ class RecorderConfig:
     # The debug image is drawn only for subscribers, so recording it would load the vision
     # node it observes.
     exclude: str = param(names.VISION_DEBUG_IMAGE, doc='comma-separated topics not to record')
+    images: str = param('all', choices=image_profile.PROFILES,
+                        doc='the camera images recorded: all, thin (at images_rate_hz) or none')
+    images_rate_hz: float = param(image_profile.THIN_RATE_HZ, lo=0.1, hi=120.0,
+                                  doc="thin: frames kept a second of sim time (the detector's "
+                                  "rate: the camera's 30 Hz over vision's detect_every 5)")
     discovery_period_s: float = param(0.5, lo=0.05, hi=10.0,
                                       doc='how often new topics are looked for (wall clock)')
     flush_period_s: float = param(1.0, lo=0.1, hi=60.0,
@@ -71,6 +77,11 @@ class RecorderNode(Node):
         self.prefix = namespace.rstrip('/') + '/'
         self.exclude = {topics.resolve(t.strip(), namespace)
                         for t in self.cfg.exclude.split(',') if t.strip()}
+        image_topics = {topics.resolve(t, namespace) for t in image_profile.IMAGE_TOPICS}
+        if self.cfg.images == 'none':
+            self.exclude |= image_topics
+        self.thinned = image_topics if self.cfg.images == 'thin' else set()
+        self.thinning = image_profile.Thinning(self.cfg.images_rate_hz)
         self.subscriptions_by_topic: dict[str, tuple[Any, Any]] = {}  # topic -> (sub, QoS)
         self.skipped: set[str] = set()
         self.sim_time = bool(self.get_parameter('use_sim_time').value)
@@ -93,7 +104,8 @@ class RecorderNode(Node):
         self.create_timer(self.cfg.flush_period_s, self.bag.flush, clock=wall)
         self.get_logger().info(f'recording {self.prefix}* and {names.CLOCK} '
                                f'to {self.bag.path}, log time: '
-                               f'{"sim time" if self.sim_time else "wall clock"}')
+                               f'{"sim time" if self.sim_time else "wall clock"}, images: '
+                               f'{self.cfg.images}')
         self.discover()
 
     def wanted(self, topic: str) -> bool:
@@ -103,7 +115,9 @@ class RecorderNode(Node):
 
     def discover(self) -> None:
         """Subscribe to every new wanted, published topic whose type is installed, and
-        again to one whose publishers now offer a QoS the subscription does not match."""
+        again to one whose publishers now offer a QoS the subscription does not match; one
+        log line names the topics it adds (each topic's own line is at debug level)."""
+        known = set(self.subscriptions_by_topic)
         for topic, type_name in topics.topic_types(self).items():
             # Wait for a publisher: its QoS decides ours (a latched topic needs
             # transient local before its one message goes by).
@@ -115,6 +129,10 @@ class RecorderNode(Node):
             if current is None or (current[1].reliability, current[1].durability) != (
                     qos.reliability, qos.durability):
                 self.subscribe(topic, type_name, qos)
+        added = sorted(set(self.subscriptions_by_topic) - known)
+        if added:
+            self.get_logger().info(f'recording {len(added)} more topics as they appeared: '
+                                   f'{", ".join(added)}')
 
     def subscribe(self, topic: str, type_name: str, qos: Any) -> None:
         """(Re)subscribe ``topic`` with ``qos``; a type that is not installed is skipped."""
@@ -133,14 +151,22 @@ class RecorderNode(Node):
             msg_type, topic, self._writer(topic), qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self.subscriptions_by_topic[topic] = (subscription, qos)
-        self.get_logger().info(
+        self.get_logger().debug(
             f'recording {topic} [{type_name}] {qos.reliability.name.lower()} '
             f'{qos.durability.name.lower()}')
 
     def _writer(self, topic: str) -> Callable[[bytes], None]:
         def callback(data: bytes) -> None:
             self.write(topic, data)
-        return callback
+
+        def thinned(data: bytes) -> None:
+            try:
+                keep = self.thinning.keep(image_profile.stamp_ns(data))
+            except ValueError:
+                keep = True         # no stamp to thin by: recorded as it came
+            if keep:
+                self.write(topic, data)
+        return thinned if topic in self.thinned else callback
 
     def write(self, topic: str, data: bytes) -> None:
         """Append one message at the node clock's time (held until sim time is known)."""

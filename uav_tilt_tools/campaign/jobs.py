@@ -25,12 +25,14 @@ Job = dict[str, Any]
 def jobs_of(n: int, seed: int, target_source: str = 'ground_truth',
             duration_s: float | None = None, threads: int = 0, record: bool = False,
             plan_file: str | None = None, scenario_file: str | None = None,
-            corners: bool = False) -> list[Job]:
-    """The ``n`` runs of campaign ``seed``: one world seed each, by run index."""
+            corners: bool = False, settings: dict[str, Any] | None = None) -> list[Job]:
+    """The ``n`` runs of campaign ``seed``: one world seed each, by run index; ``settings``:
+    every run's controller and vehicle parameters (``uav-tilt fly --set``)."""
     seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=n)
     return [dict(index=i, seed=int(s), target_source=target_source, duration_s=duration_s,
                  threads=threads, record=record, plan_file=plan_file,
-                 scenario_file=scenario_file, corners=corners) for i, s in enumerate(seeds)]
+                 scenario_file=scenario_file, corners=corners, settings=dict(settings or {}))
+            for i, s in enumerate(seeds)]
 
 
 def with_conditions(scenario: Scenario, drawn: Scenario) -> Scenario:
@@ -46,11 +48,13 @@ def run_one(job: Job) -> tuple[dict[str, Any], bytes | None]:
     """One campaign run (top level so that worker processes can pickle it): (the run's
     dict, the bytes of its MCAP recording when ``job['record']``, else None)."""
     scenario, hint = random_draw(job['seed'], job['corners'])
-    overrides = site_overrides(scenario, hint) if hint is not None else {}
+    settings = job.get('settings') or {}
+    overrides = {**settings, **(site_overrides(scenario, hint) if hint is not None else {})}
     with tempfile.TemporaryDirectory(prefix='uav_tilt_run_') as tmp:
         if job['plan_file']:
             scenario = with_conditions(load_scenario(job['scenario_file']), scenario)
-            hint, overrides = None, {**site_overrides(scenario), 'plan_file': job['plan_file']}
+            hint, overrides = None, {**site_overrides(scenario), **settings,
+                                     'plan_file': job['plan_file']}
         result = fly(scenario, job['target_source'], overrides, job['duration_s'],
                      threads=job['threads'], record=tmp if job['record'] else None)
         bag = None

@@ -27,9 +27,11 @@ def campaign(n: int, seed: int, workers: int | None = None, target_source: str =
              duration_s: float | None = None, progress: bool = True, backend: str = 'local',
              address: str | None = None, out: str | os.PathLike[str] | None = None,
              resume: bool = False, record: bool = False, plan_file: str | None = None,
-             scenario_file: str | None = None, corners: bool = False) -> dict[str, Any]:
+             scenario_file: str | None = None, corners: bool = False,
+             settings: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run ``n`` randomised missions (of the plan ``plan_file`` on ``scenario_file``'s
-    wall when given; ``duration_s`` None: the plan's
+    wall when given; ``settings``: the controller's and vehicle's parameters of every run,
+    as ``uav-tilt fly --set`` takes them; ``duration_s`` None: the plan's
     (:func:`uav_tilt_tools.runner.fly.default_duration_s`); ``corners``: worlds at the ends
     of every range, :func:`uav_tilt_sim.randomise.random_draw`); returns the
     DESIGN section 7 JSON dict.
@@ -58,17 +60,22 @@ def campaign(n: int, seed: int, workers: int | None = None, target_source: str =
         workers = workers or min(n, cpus)
         threads = max(1, cpus // max(workers, 1))
     jobs = jobs_of(n, seed, target_source, duration_s, threads, record, plan_file,
-                   scenario_file, corners)
+                   scenario_file, corners, settings)
     store = None
     if out is not None:
         # files as the same path however written ('./a.yaml', 'a.yaml', absolute), and what
         # they hold, for the resume
-        args = dict(n=n, seed=seed, target_source=target_source, duration_s=duration_s,
-                    plan_file=plan_file and os.path.realpath(plan_file),
-                    scenario_file=scenario_file and os.path.realpath(scenario_file),
-                    **file_digests(plan_file=plan_file, scenario_file=scenario_file))
+        args: dict[str, Any] = dict(n=n, seed=seed, target_source=target_source,
+                                    duration_s=duration_s,
+                                    plan_file=plan_file and os.path.realpath(plan_file),
+                                    scenario_file=scenario_file
+                                    and os.path.realpath(scenario_file),
+                                    **file_digests(plan_file=plan_file,
+                                                   scenario_file=scenario_file))
         if corners:     # only then, so that folders of earlier campaigns still resume
             args['corners'] = True
+        if settings:    # the same
+            args['settings'] = settings
         store = RunStore(out, args, resume)
     done = store.runs_of(jobs) if store is not None else {}
     todo = [job for job in jobs if job['index'] not in done]

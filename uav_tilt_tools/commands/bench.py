@@ -10,8 +10,8 @@ from uav_tilt_tools.bench.suite import BENCHES, run_bench
 
 def register(sub: 'argparse._SubParsersAction[Any]') -> None:
     """Add the `bench` sub-command."""
-    parser = sub.add_parser('bench', help='speed measurements, one JSON object on stdout')
-    parser.add_argument('what', choices=sorted(BENCHES))
+    parser = cli_args.add_command(sub, 'bench', 'speed measurements, one JSON object on stdout')
+    parser.add_argument('what', choices=sorted(BENCHES), help='what to measure')
     parser.add_argument('--seconds', type=cli_args.duration_s, default=None,
                         help='length of each measurement (default: 30 s control, 20 s of '
                              'simulated time graph, the whole mission campaign*, else 10 s; '

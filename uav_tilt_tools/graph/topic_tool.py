@@ -4,9 +4,12 @@ what it found and returns the command's exit code.
 Topic names are absolute or relative to /uav; ROS_DOMAIN_ID comes from the environment.
 """
 import array
+import difflib
+import os
 import signal
+import struct
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 import rclpy
@@ -14,9 +17,14 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from uav_tilt_common import cli_args
+from uav_tilt_common.names import CLOCK
 from uav_tilt_common.ros_params import STOP_SIGNALS, note_stop_signals
 from uav_tilt_tools.graph import topics
 
+# A monitor gives way to the graph it watches: on a machine with no core to spare the
+# lockstep loop keeps its CPU, and the monitor drops what it cannot take (best effort).
+MONITOR_NICENESS = 10
+HZ_DEPTH = 1000
 # Sequences longer than this print as a count, as image data would flood the terminal
 # (`ros2 topic echo`'s default --truncate-length): statuses (40 key-values) and covariances
 # (36) show whole.
@@ -68,12 +76,62 @@ def rate_stats(times_s: list[float]) -> dict[str, float] | None:
                 std_s=periods.std(), window=len(periods))
 
 
+def not_appeared(name: str, timeout_s: float, known: Iterable[str]) -> str:
+    """The line for a topic that did not appear: with the graph's topic nearest its name
+    when one is close (a misspelt name)."""
+    close = difflib.get_close_matches(name, sorted(known), n=1)
+    hint = f' (did you mean {close[0]}?)' if close else ''
+    return f'topic {name} did not appear within {timeout_s} s{hint}'
+
+
+def rate_lines(arrivals_s: list[float], stamps_s: list[float], sim_clock: bool
+               ) -> list[str] | None:
+    """What `topic hz` prints: the rate on the wall clock (``arrivals_s``, when the
+    messages came) like `ros2 topic hz`, then, when the messages carry header stamps that
+    advance (``stamps_s``), the rate per second of those: of sim time when the graph has a
+    /clock (``sim_clock``; the rates the docs give), which is the wall clock's times the
+    real-time factor. None without two messages."""
+    stats = rate_stats(arrivals_s)
+    if stats is None:
+        return None
+    lines = [f"average rate: {stats['rate_hz']:.3f} Hz (wall clock)",
+             f"\tmin: {stats['min_s']:.5f}s max: {stats['max_s']:.5f}s "
+             f"std dev: {stats['std_s']:.5f}s window: {stats['window']}"]
+    span_s = max(stamps_s) - min(stamps_s) if len(stamps_s) > 1 else 0.0
+    clock = 'sim time' if sim_clock else 'the header stamps'
+    if span_s > 0.0:
+        lines.append(f'rate per second of {clock}: {(len(stamps_s) - 1) / span_s:.3f} Hz '
+                     f'(header stamps over {span_s:.3f} s)')
+    else:
+        lines.append('no rate per second of sim time: the messages carry no advancing '
+                     'header stamp')
+    return lines
+
+
+def starts_with_header(message_class: Any) -> bool:
+    """Whether messages of ``message_class`` begin with a std_msgs/Header."""
+    fields = list(message_class.get_fields_and_field_types().items())
+    return bool(fields) and fields[0] == ('header', 'std_msgs/Header')
+
+
+def cdr_header_stamp_s(data: bytes) -> float | None:
+    """The header stamp (seconds) of a serialized message that begins with a
+    std_msgs/Header, read from its CDR bytes without deserializing the rest (its
+    encapsulation, then int32 sec and uint32 nanosec); None when too short or of an
+    unknown encapsulation."""
+    if len(data) < 12 or data[1] not in (0, 1):
+        return None
+    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    return sec + nanosec * 1e-9
+
+
 # --- the verbs -----------------------------------------------------------------------------
 class _Session:
     """rclpy context and a node, for one command. Ctrl-C ends its spin (``interrupted``)
     instead of raising wherever the command is."""
 
     def __enter__(self) -> '_Session':
+        os.nice(MONITOR_NICENESS)
         self._handlers = {number: signal.getsignal(number) for number in STOP_SIGNALS}
         self.stop = note_stop_signals()
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
@@ -101,17 +159,20 @@ class _Session:
             self.executor.spin_once(timeout_sec=0.05)
         return predicate()
 
-    def subscribe(self, topic: str, timeout_s: float, callback: Callable[[Any], None]
-                  ) -> str | None:
-        """Wait for ``topic`` to appear, subscribe; returns its type or None if it never did."""
+    def subscribe(self, topic: str, timeout_s: float, callback: Callable[[Any], None],
+                  raw: bool = False, depth: int = 100) -> str | None:
+        """Wait for ``topic`` to appear, subscribe as a monitor (:func:`topics.monitor_qos`,
+        keeping ``depth`` messages; ``raw``: the callback takes the serialized bytes);
+        returns its type or None if it never did."""
         name = topics.resolve(topic)
         if not self.spin_until(lambda: name in topics.topic_types(self.node), timeout_s):
             if not self.interrupted:
-                print(f'topic {name} did not appear within {timeout_s} s')
+                print(not_appeared(name, timeout_s, topics.topic_types(self.node)))
             return None
         type_name = topics.topic_types(self.node)[name]
-        qos = topics.subscription_qos(self.node, name, depth=100)
-        self.node.create_subscription(topics.message_class(type_name), name, callback, qos)
+        qos = topics.monitor_qos(self.node, name, depth)
+        self.node.create_subscription(topics.message_class(type_name), name, callback, qos,
+                                      raw=raw)
         return type_name
 
 
@@ -152,21 +213,32 @@ def echo(topic: str, n: int | None, max_sequence: int | None, timeout_s: float) 
 
 
 def hz(topic: str, window_s: float, timeout_s: float) -> int:
-    """Listen to ``topic`` for ``window_s`` seconds (or until Ctrl-C), then print the rate
-    like `ros2 topic hz`."""
+    """Listen to ``topic`` for ``window_s`` seconds of wall time (or until Ctrl-C), then
+    print its rate like `ros2 topic hz`, and the rate per second of its header stamps
+    (:func:`rate_lines`)."""
     arrivals: list[float] = []
+    stamps: list[float] = []
+    with_header = False     # known once subscribed, before any message is taken
+
+    def heard(data: bytes) -> None:
+        # serialized: a 300 Hz topic is not deserialized only to be counted
+        arrivals.append(time.monotonic())
+        stamp = cdr_header_stamp_s(data) if with_header else None
+        if stamp is not None:
+            stamps.append(stamp)
     with _Session() as session:
-        if session.subscribe(topic, timeout_s,
-                             lambda _: arrivals.append(time.monotonic())) is None:
+        # seconds of a 300 Hz topic: a monitor that waits for a core drops none of them
+        type_name = session.subscribe(topic, timeout_s, heard, raw=True, depth=HZ_DEPTH)
+        if type_name is None:
             return cli_args.INTERRUPTED if session.interrupted else 1
+        with_header = starts_with_header(topics.message_class(type_name))
         start = time.monotonic()
         session.spin_until(lambda: False, window_s)
         listened_s = time.monotonic() - start
-    stats = rate_stats(arrivals)
-    if stats is None:
-        print(f'no rate: {len(arrivals)} messages in {listened_s:.1f} s')
+        sim_clock = CLOCK in topics.topic_types(session.node)
+    lines = rate_lines(arrivals, stamps, sim_clock)
+    if lines is None:
+        print(f'no rate: {len(arrivals)} messages in {listened_s:.1f} s of wall clock')
         return 1
-    print(f"average rate: {stats['rate_hz']:.3f}\n"
-          f"\tmin: {stats['min_s']:.5f}s max: {stats['max_s']:.5f}s "
-          f"std dev: {stats['std_s']:.5f}s window: {stats['window']}")
+    print('\n'.join(lines))
     return 0

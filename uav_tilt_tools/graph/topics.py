@@ -53,6 +53,17 @@ def offered_qos(node: Node, topic: str) -> list[QoSProfile]:
             or [contract_offer(relative)])
 
 
+def monitor_qos(node: Node, topic: str, depth: int) -> QoSProfile:
+    """What a monitor (`uav-tilt topic echo | hz`) subscribes with: best effort, so that a
+    monitor that falls behind drops messages instead of making a reliable publisher of the
+    lockstep loop keep and resend them; a latched topic as :func:`subscription_qos` takes
+    it (its last message reaches a late reliable reader only)."""
+    qos = subscription_qos(node, topic, depth)
+    if qos.durability != DurabilityPolicy.TRANSIENT_LOCAL:
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    return qos
+
+
 def subscription_qos(node: Node, topic: str, depth: int) -> QoSProfile:
     """A QoS that matches the publishers of ``topic`` as they are now, as rosbag2 chooses
     it: reliable when every publisher is (so nothing they send is lost), best effort when

@@ -14,7 +14,9 @@ true tool tip. Each key means one thing (DESIGN section 7):
 - ``poi_error_m``, ``poi_error_max_m``: mean and largest distance from the true tool tip
   to the true point of interest over HOLD, along the surface (a wall that gives way lets the
   tip sink in along the normal; that depth is not an error of where it touches).
-- ``hold_time_s``: sim time spent in HOLD; ``mission_time_s``: from leaving IDLE to being
+- ``hold_time_s``: sim time in HOLD, each run from its first sample to its last (with a
+  plan, :func:`metrics.tasks.with_tasks` puts the first touch's here, which is measured the
+  same way over its hold window); ``mission_time_s``: from leaving IDLE to being
   back in IDLE (or to the last sample).
 
 The modes are samples of the controller's status (:func:`mode_samples`: each tick in

@@ -9,7 +9,8 @@ reason, contact_lost, t_contact_s = [start, end] of HOLD or SLIDE, ...).
 - touch: over the hold, the tool tip's distance from the target's point of interest along
   the surface (``poi_error_m``, ``poi_error_max_m``), the push's mean and RMS error against
   the task's force; a touch the controller completed that misses the inspection bar
-  (:func:`missed_bar`) is no success, its reason the bar's;
+  (:func:`missed_bar`), or that nothing could score (no truth of its target, no push
+  measured: 'unscored'), is no success, its reason the bar's;
 - slide: over the slide, the push's RMS error, the tool tip's distance from the requested
   line in the wall's plane (``path_rms_error_m``, ``path_max_error_m``), the length of line
   it covered, measured along the line as the mission measures it (``length_m``,
@@ -33,6 +34,9 @@ from uav_tilt_control.plan import LineProgress
 POI_BAR_M = 0.01
 FORCE_MEAN_BAR_N = 0.1
 FORCE_RMS_BAR_N = 0.2
+# A task the controller completed that the truth cannot judge (no target truth, no tool tip
+# or push measured over it): never a success.
+UNSCORED = 'unscored'
 # a target's truth: (POI in map, R_map_target)
 Truth = tuple[np.ndarray, np.ndarray]
 
@@ -61,31 +65,33 @@ def task_results(tasks: Iterable[dict[str, Any]], t_s: npt.ArrayLike, tip_map: n
             entry.update(target=task.get('target', ''),
                          **_touch(task, t_s[mask], tip_map[mask], force_map[mask],
                                   (targets or {}).get(task.get('target', '')), wall_normal_map))
-            missed = entry['success'] and missed_bar(entry)
-            if missed:
-                # completed by the controller, yet off the bar by the truth (a push that
-                # fell short of its force, a press on a look-alike)
-                entry.update(success=False, reason=missed)
         else:
             normal = _normal(task, wall_normal_map)
             entry.update(_slide(task, t_s[mask], tip_map[mask], force_map[mask] @ normal,
                                 normal))
+        missed = entry['success'] and missed_bar(entry)
+        if missed:
+            # completed by the controller, yet off the bar by the truth (a push that fell
+            # short of its force, a press on a look-alike), or with no truth to judge by
+            entry.update(success=False, reason=missed)
         out.append(entry)
     return out
 
 
 def missed_bar(task: dict[str, Any]) -> str | None:
-    """Why a touch the controller completed misses the inspection bar by the truth:
+    """Why a task the controller completed is no success by the truth: a touch
     'off_target' (the tool tip pressed elsewhere, such as on a look-alike) or
-    'force_off_setpoint'; None when it meets it, or where there is nothing to judge (a
-    slide, a touch without ground truth)."""
+    'force_off_setpoint'; :data:`UNSCORED` for a touch without its POI error or push (no
+    truth of its target: none designated, a real vehicle) or a slide without its path
+    error; None when it meets the bar (a slide: has its scores)."""
     if task['kind'] != 'touch':
-        return None
-    if task['poi_error_max_m'] is not None and task['poi_error_max_m'] > POI_BAR_M:
-        return 'off_target'
+        return UNSCORED if task.get('path_max_error_m') is None else None
     mean_n, rms_n = task['force_mean_n'], task['force_rms_error_n']
-    if mean_n is not None and (abs(mean_n - task['force_setpoint_n']) > FORCE_MEAN_BAR_N
-                               or rms_n > FORCE_RMS_BAR_N):
+    if task['poi_error_max_m'] is None or mean_n is None:
+        return UNSCORED
+    if task['poi_error_max_m'] > POI_BAR_M:
+        return 'off_target'
+    if abs(mean_n - task['force_setpoint_n']) > FORCE_MEAN_BAR_N or rms_n > FORCE_RMS_BAR_N:
         return 'force_off_setpoint'
     return None
 
@@ -99,11 +105,16 @@ def failure_of(result: dict[str, Any]) -> dict[str, Any] | None:
     """Why a run missed the inspection bar, as {'reason', 'mode', 'phase'}, or None when it
     met it: the failsafe that ended it (the controller's last failsafe reason: a task's
     failure writes one too) and where it fired, else what kept it from
-    completing; for a run the controller completed, the first touch that the truth puts
-    off the bar (:func:`missed_bar`, in HOLD)."""
+    completing; for a run the controller completed, the first task that the truth puts
+    off the bar or cannot score (:func:`missed_bar`, in HOLD or SLIDE). `uav-tilt fly`,
+    `uav-tilt report` and the campaign all judge a run by this."""
     if result['success']:
-        missed = first_missed_bar(result.get('tasks'))
-        return {'reason': missed, 'mode': Mode.HOLD.value, 'phase': ''} if missed else None
+        for task in result.get('tasks') or ():
+            missed = missed_bar(task)
+            if missed:
+                mode = Mode.HOLD if task['kind'] == 'touch' else Mode.SLIDE
+                return {'reason': missed, 'mode': mode.value, 'phase': ''}
+        return None
     reason = result.get('failsafe_reason')
     where = result.get('failsafe_where') or {}
     failed = [t for t in result.get('tasks', ()) if not t['success'] and t['reason']]
@@ -149,7 +160,7 @@ def _force_stats(push: np.ndarray, force_n: float) -> dict[str, float | None]:
 
 def _touch(task: dict[str, Any], t_s: np.ndarray, tips: np.ndarray, forces: np.ndarray,
            truth: Truth | None, wall_normal_map: npt.ArrayLike | None) -> dict[str, Any]:
-    out = dict(poi_error_m=None, poi_error_max_m=None, hold_time_s=0.0, hold_tip_map=None,
+    out = dict(poi_error_m=None, poi_error_max_m=None, hold_time_s=None, hold_tip_map=None,
                **_force_stats(np.zeros(0), 0.0))
     if truth is not None:
         normal = truth[1][:, 2]
@@ -218,10 +229,12 @@ FIRST_TOUCH_KEYS = ('poi_error_m', 'poi_error_max_m', 'force_setpoint_n', 'force
 def with_tasks(summary: dict[str, Any], tasks: Sequence[dict[str, Any]] | None
                ) -> dict[str, Any]:
     """``summary`` (a :mod:`metrics.mission` summary) with the plan's ``tasks`` (None: no plan
-    recorded) and, for a plan of more than one task, its touch keys from the first touch
-    alone: over every HOLD they would mix targets and setpoints. Returns ``summary``."""
+    recorded) and, with a plan, its touch keys (:data:`FIRST_TOUCH_KEYS`) from the first
+    touch alone (None without a touch): over every HOLD they would mix targets and
+    setpoints, and the top level then says what its task says (the one-touch inspection is
+    a plan of one touch). Returns ``summary``."""
     summary['tasks'] = tasks
-    if tasks and len(tasks) > 1:
+    if tasks:
         touches = [task for task in tasks if task['kind'] == 'touch']
         for key in FIRST_TOUCH_KEYS:
             if key in summary:

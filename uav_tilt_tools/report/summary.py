@@ -5,7 +5,9 @@ The recording is read by :mod:`uav_tilt_tools.bag.reader` and the mission is sco
 only a run of the node graph has, measured on the wall clock:
 
 - ``rtf``: sim time over wall time of the plant (plant/status ``sim_time_s`` and
-  ``wall_time_s``, first to last status recorded).
+  ``wall_time_s``, from its first status past sim time 0 to its last: a recorded lockstep
+  run waits at sim time 0 for the recorder and the controller, seconds that are not the
+  run's, and the controller's rate is counted from its first tick alike).
 - ``controller_rate_hz``: control ticks over wall time of the controller (controller/status
   ``ticks`` and ``wall_time_s``, from its first status with a tick to its last), as `uav-tilt
   fly` counts its ticks over the flight's wall time.
@@ -68,7 +70,8 @@ def summarize(rec: Recording, tool_tip_x_m: float) -> dict[str, Any]:
                               *(target[0], target[1][:, 2]) if target is not None
                               else (None, None))
     summary.update(
-        rtf=per_wall_second(reader.statuses(rec, names.PLANT_STATUS), 'sim_time_s'),
+        rtf=per_wall_second(reader.statuses(rec, names.PLANT_STATUS), 'sim_time_s',
+                            from_first_count=True),
         controller_rate_hz=per_wall_second(ctrl, 'ticks', from_first_count=True),
         vision_fps=median_of(vision, 'fps'),
         vision_latency_ms_p95=median_of(vision, 'latency_ms_p95'))

@@ -19,13 +19,16 @@ from uav_tilt_vision.target_pose import CameraIntrinsics
 
 
 class Frame(NamedTuple):
-    """The newest frame: its stamp, the pipeline's result, and the wall clock (ns) when the
-    image was ready and when the pipeline was done with it."""
+    """The newest frame: its stamp, the pipeline's result, the wall clock (ns) when the
+    image was ready and when the pipeline was done with it, and the images (for a
+    recording that keeps them)."""
 
     stamp_s: float
     result: FrameResult
     rendered_ns: int
     processed_ns: int
+    rgb: Any = None
+    depth: Any = None
 
 
 class CameraVision:
@@ -53,7 +56,7 @@ class CameraVision:
         rgb, depth, _ = plant.render()
         rendered_ns = time.time_ns()
         result = self.pipeline.process(rgb, depth, t_s)
-        self.last_frame = Frame(t_s, result, rendered_ns, time.time_ns())
+        self.last_frame = Frame(t_s, result, rendered_ns, time.time_ns(), rgb, depth)
         self.latency_ms.append((self.last_frame.processed_ns - rendered_ns) * 1e-6)
         self.frames += 1
         self.found += int(result.found)

@@ -12,15 +12,17 @@ from typing import TYPE_CHECKING, Any, Iterable
 
 import numpy as np
 
-from uav_tilt_common.config import from_dict
-from uav_tilt_control.controller_core import ControllerConfig, plan_of
+from uav_tilt_common.config import ConfigError
+from uav_tilt_common.vehicle import VehicleParams
+from uav_tilt_control.controller_core import plan_of
 from uav_tilt_control.mission import MissionConfig
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
-from uav_tilt_sim.scenario import Scenario
+from uav_tilt_sim.scenario import Scenario, check_target, target_ids
 from uav_tilt_tools.bag.flight_bag import FlightBag
 from uav_tilt_tools.bag.folder import recording_folder
 from uav_tilt_tools.metrics.tasks import failure_of
-from uav_tilt_tools.runner.inprocess import run_mission
+from uav_tilt_tools.runner.inprocess import Progress, run_mission
+from uav_tilt_tools.runner.settings import split_settings
 from uav_tilt_tools.runner.site_params import site_overrides
 
 if TYPE_CHECKING:     # the vision stack (torch) is imported only for a flight with vision
@@ -39,21 +41,25 @@ def default_duration_s(plan: Iterable[Any]) -> float:
 
 def fly(scenario: Scenario, target_source: str = 'vision',
         overrides: dict[str, Any] | None = None, duration_s: float | None = None,
-        model_path: str = '', threads: int = 0, record: str | None = None) -> dict[str, Any]:
+        model_path: str = '', threads: int = 0, record: str | None = None,
+        record_images: str = 'none', progress: Progress | None = None) -> dict[str, Any]:
     """Fly the inspection mission of ``scenario`` (the plan in ``overrides['plan_file']``
     when given) for at most ``duration_s`` (default :func:`default_duration_s`); returns the
-    summary dict.
+    summary dict. ``overrides``: the controller's parameters and ``vehicle.*``, the vehicle
+    flown and the controller's model of it (:mod:`uav_tilt_tools.runner.settings`).
 
     ``threads``: the detector's (and OpenCV's) thread pool, 0 = the libraries' defaults;
     ``record``: a folder to write the flight to as the recorder writes a run
     (:mod:`uav_tilt_tools.bag.flight_bag`: recording.mcap and rosbag2's metadata.yaml;
-    FileExistsError when it holds a recording, :func:`bag.folder.recording_folder`).
+    FileExistsError when it holds a recording, :func:`bag.folder.recording_folder`), with the
+    camera images ``record_images`` keeps (``all``, ``thin``, ``none``:
+    :mod:`uav_tilt_tools.bag.images`); ``progress``: see :func:`run_mission`.
     """
     values = {'target_source': target_source, **(overrides or {})}
-    config = from_dict(ControllerConfig, values)
+    config, vehicle = split_settings(values)
     if duration_s is None:
-        duration_s = default_duration_s(plan_of(config))
-    plant_config = PlantCoreConfig()
+        duration_s = default_duration_s(plan_of(config, vehicle))
+    plant_config = PlantCoreConfig(vehicle=vehicle)
     vision: CameraVision | None = None
     if target_source == 'vision':
         # the vision stack (torch) only for a flight that has vision in the loop
@@ -62,11 +68,13 @@ def fly(scenario: Scenario, target_source: str = 'vision',
     bag = None
     if record is not None:
         bag = FlightBag(recording_folder(record), config, plant_config.camera, vision,
+                        images=record_images,
                         own_folder=True)
     start = time.perf_counter()
     try:
-        result = run_mission(scenario, config, duration_s=duration_s,
-                             plant_config=plant_config, vision=vision, recorder=bag)
+        result = run_mission(scenario, config, duration_s=duration_s, vehicle=vehicle,
+                             plant_config=plant_config, vision=vision, recorder=bag,
+                             progress=progress)
         wall_s = time.perf_counter() - start    # of the flight, not of the file's closing
     finally:
         if bag is not None:
@@ -83,20 +91,44 @@ def fly(scenario: Scenario, target_source: str = 'vision',
     return result
 
 
+def check_mission(scenario: Scenario, overrides: dict[str, Any] | None = None,
+                  plan_file: str | None = None) -> dict[str, Any]:
+    """What :func:`fly` flies, checked before it flies (ConfigError, one line, when bad):
+    the plan ``plan_file`` against ``scenario`` (:func:`check_plan`) or, for the one-touch
+    inspection, the target the scenario designates; the settings ``overrides`` (the
+    controller's and ``vehicle.*``); the world, built once with that vehicle. Returns the
+    overrides that fly it."""
+    if plan_file:
+        overrides = check_plan(scenario, plan_file, overrides)
+    else:
+        check_target(scenario)
+    config, vehicle = split_settings(overrides)
+    plan_of(config, vehicle)
+    check_world(scenario, vehicle)
+    return dict(overrides or {})
+
+
 def check_plan(scenario: Scenario, plan_file: str, overrides: dict[str, Any] | None = None
                ) -> dict[str, Any]:
-    """Validate ``plan_file`` against the site of ``scenario`` (ConfigError when bad);
-    returns the controller overrides that fly it: the scenario's site, where ``overrides``
-    (the user's) do not say otherwise."""
+    """Validate ``plan_file`` against the site of ``scenario`` (ConfigError when bad): each
+    touch names one of the scenario's target ids, even where the user's ``site.target_ids``
+    says otherwise. Returns the controller overrides that fly it: the scenario's site, where
+    ``overrides`` (the user's) do not say otherwise."""
     overrides = {**site_overrides(scenario), **(overrides or {}), 'plan_file': plan_file}
-    plan_of(from_dict(ControllerConfig, overrides))
+    ids = target_ids(scenario)
+    for i, task in enumerate(plan_of(*split_settings(overrides))):
+        if task.kind == 'touch' and task.target not in ids:
+            raise ConfigError(f"plan_file '{plan_file}': tasks[{i}] (touch): 'target' = "
+                              f"{task.target!r} is not a target of the scenario (its "
+                              f"targets with an id: {ids!r})")
     return overrides
 
 
-def check_world(scenario: Scenario) -> None:
-    """ConfigError when ``scenario``'s world cannot be flown: it is built once, as the plant
-    builds it (a start in the wall is refused there)."""
-    Plant(PlantCoreConfig(), scenario).close()
+def check_world(scenario: Scenario, vehicle: VehicleParams | None = None) -> None:
+    """ConfigError when ``scenario``'s world cannot be flown by ``vehicle`` (default
+    VehicleParams()): it is built once, as the plant builds it (a start in the wall is
+    refused there)."""
+    Plant(PlantCoreConfig(vehicle=vehicle or VehicleParams()), scenario).close()
 
 
 def jsonable(value: Any) -> Any:

@@ -24,6 +24,9 @@ from uav_tilt_tools.metrics.tasks import task_results, with_tasks
 Vision = Callable[[Plant, float], Optional[tuple[float, Any, Any]]]
 # recorder(flight, sensors, command), after the controller's tick
 Recorder = Callable[['Flight', TickSensors, ActuatorCommand], None]
+# progress(t_s, duration_s, mode): how far a flight is, every PROGRESS_TICKS ticks
+Progress = Callable[[float, float, str], None]
+PROGRESS_TICKS = 30
 
 
 class Flight:
@@ -176,9 +179,11 @@ def _first_touch_peak(log: list[dict[str, Any]], push: np.ndarray, window_s: flo
 def run_mission(scenario: Scenario, controller_config: ControllerConfig | None = None,
                 duration_s: float = 120.0, vehicle: VehicleParams | None = None,
                 plant_config: PlantCoreConfig | None = None, vision: Vision | None = None,
-                recorder: Recorder | None = None) -> dict[str, Any]:
+                recorder: Recorder | None = None, progress: Progress | None = None
+                ) -> dict[str, Any]:
     """Fly the configured plan (``inspect`` at t = 0: the one-touch inspection unless
-    ``controller_config.plan_file`` names a plan) until landed or ``duration_s``.
+    ``controller_config.plan_file`` names a plan) until landed or ``duration_s``;
+    ``progress`` (it only reads) is told how far it got every :data:`PROGRESS_TICKS` ticks.
 
     Returns :func:`mission_result`'s dict.
     """
@@ -189,7 +194,15 @@ def run_mission(scenario: Scenario, controller_config: ControllerConfig | None =
         ok, message = flight.core.inspect()
         if not ok:
             raise RuntimeError(f'inspect refused: {message}')
-        flight.run(duration_s, until=lambda f: f.core.mission.mode == Mode.IDLE)
+        ticks = [0]
+
+        def landed(f: Flight) -> bool:
+            mode = f.core.mission.mode
+            if progress is not None and ticks[0] % PROGRESS_TICKS == 0:
+                progress(f.t_s, duration_s, mode.value)
+            ticks[0] += 1
+            return mode == Mode.IDLE
+        flight.run(duration_s, until=landed)
         return mission_result(flight)
     finally:
         flight.close()

@@ -1,15 +1,16 @@
 """The controller's site from a scenario, as a survey would give it: the wall and its
 target ids (uav_tilt_control.site.SiteConfig).
 
-``python -m uav_tilt_tools.runner.site_params [SCENARIO]`` prints them as ROS arguments, one word
-a line (``-p``, ``site.wall_yaw_deg:=0.0``, ...), for scripts/launch.sh; an empty SCENARIO
-is the default scenario. A bad scenario prints one line on stderr and exits 2.
+``python -m uav_tilt_tools.runner.site_params [SCENARIO [MISSION]]`` prints them as ROS
+arguments, one word a line (``-p``, ``site.wall_yaw_deg:=0.0``, ...), for scripts/launch.sh;
+an empty SCENARIO is the default scenario. A bad scenario, or with MISSION ``inspect`` one
+that designates no target, prints one line on stderr and exits 2.
 """
 import sys
 from typing import Any, Sequence
 
 from uav_tilt_common.config import ConfigError
-from uav_tilt_sim.scenario import Scenario, load_scenario, target_ids
+from uav_tilt_sim.scenario import Scenario, check_target, load_scenario, target_ids
 
 
 def site_overrides(scenario: Scenario, hint_uv_m: Sequence[float] | None = None
@@ -45,6 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
         scenario = load_scenario(argv[0] if argv and argv[0] else None)
+        if argv[1:2] == ['inspect']:    # the one-touch inspection needs its target
+            check_target(scenario)
     except (OSError, ConfigError) as err:
         print(f'site_params: {err}', file=sys.stderr)
         return 2

@@ -134,25 +134,16 @@ def _pruning_ratio(text: str) -> float:
     return cli_args.ratio_up_to(MAX_PRUNING_RATIO)(text)
 
 
-class _Defaults(argparse.ArgumentDefaultsHelpFormatter):
-    """Help that shows the options' default values (not the absent ones: None, False)."""
-
-    def _get_help_string(self, action: argparse.Action) -> str | None:
-        if action.default is None or action.default is False:
-            return action.help
-        return super()._get_help_string(action)
-
-
 def parser() -> argparse.ArgumentParser:
     """The argparse parser of the vision sub-commands."""
     ap = argparse.ArgumentParser(prog='uav-tilt vision', description=DESCRIPTION,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+                                 formatter_class=cli_args.HelpFormatter)
     ap.add_argument('--threads', type=cli_args.non_negative, default=0,
-                    help='torch CPU threads (0: default)')
-    sub = ap.add_subparsers(dest='command', required=True)
+                    help="torch CPU threads (0: torch's own choice)")
+    sub = ap.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
-    def command(name: str, **kw: Any) -> argparse.ArgumentParser:
-        return sub.add_parser(name, formatter_class=_Defaults, **kw)
+    def command(name: str, help: str) -> argparse.ArgumentParser:
+        return cli_args.add_command(sub, name, help)
 
     d = command('dataset', help='render a labelled, domain-randomised image set')
     d.add_argument('--out', required=True, help='a new or empty folder')
@@ -168,7 +159,7 @@ def parser() -> argparse.ArgumentParser:
                         'plane (default dataset.DISTANCE_M: the mission\'s ranges)')
     d.set_defaults(run=_dataset)
     t = command('train', help='train the fp32 detector; writes weights + model card')
-    t.add_argument('--data', required=True)
+    t.add_argument('--data', required=True, help='training set (a `dataset` folder)')
     t.add_argument('--out', default=f'{MODELS}/detector_fp32.pt', help='weights; the card beside')
     t.add_argument('--epochs', type=cli_args.count, default=16, help='passes over --data')
     t.add_argument('--seed', type=cli_args.seed, default=0, help='random seed')
@@ -206,7 +197,7 @@ def parser() -> argparse.ArgumentParser:
                         'AVX-512 BF16 and on GPUs)')
     t.set_defaults(run=_train)
     e = command('eval', help='COCO mAP of a model on a YOLO-format set')
-    e.add_argument('--data', required=True)
+    e.add_argument('--data', required=True, help='the set to score (a `dataset` folder)')
     e.add_argument('--model', default=f'{MODELS}/detector_fp32.pt', help='.pt or .onnx')
     e.add_argument('--backend', default='auto', choices=('auto', 'torch', 'onnxruntime'),
                    help='auto: by the file suffix')
@@ -260,8 +251,9 @@ def register(sub: 'argparse._SubParsersAction[Any]') -> None:
     """Add ``uav-tilt vision ...``: everything after ``vision`` goes to :func:`main`."""
     p = sub.add_parser('vision', add_help=False, prefix_chars='\0',
                        help='detector data set, training, evaluation, compression, profile')
-    p.add_argument('args', nargs=argparse.REMAINDER)
-    p.set_defaults(func=lambda a: main(a.args))
+    p.add_argument('args', nargs=argparse.REMAINDER,
+                   help='a sub-command and its options (`uav-tilt vision --help`)')
+    p.set_defaults(func=lambda a: main(a.args), full_parser=parser)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
