@@ -56,7 +56,7 @@ def test_an_interrupted_command_is_one_line_and_leaves_nothing(tmp_path, tmp, ar
         assert wait_for(lambda: any(p.name.startswith('uav_tilt_run_') for p in tmp.iterdir())
                         or proc.poll() is not None, 120.0)
     else:                   # flying, well past the imports
-        assert not wait_for(lambda: proc.poll() is not None, 8.0)
+        assert not wait_for(lambda: proc.poll() is not None, 8.0), proc.communicate()
     workers = children(proc.pid)
     if how == 'ctrl-c':
         os.killpg(proc.pid, signal.SIGINT)
