@@ -91,8 +91,6 @@ def test_ground_truth_inspection_mission_in_lockstep(tmp_path, probe):
 def test_a_stalled_controller_only_pauses_lockstep(tmp_path, probe):
     """A controller starved of CPU for seconds (a loaded machine) is no lost controller: in
     lockstep simulated time waits for it, with no failsafe and no gap in the flight."""
-    plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
-                  params={'camera_enabled': 'false', 'status_rate_hz': 10.0})
     controller = start('uav_tilt_control.controller_node', log_path=tmp_path / 'controller.log',
                        params={'target_source': 'ground_truth', 'autostart': 'inspect'})
     modes = []
@@ -103,8 +101,17 @@ def test_a_stalled_controller_only_pauses_lockstep(tmp_path, probe):
 
     def sim_time_s():
         return float(probe.latest_status(names.PLANT_STATUS)['sim_time_s'])
+    plant = None
     try:
-        assert probe.spin_until(lambda: 'HOVER' in modes or 'SEARCH' in modes, 120.0), modes
+        # Lockstep: the flight waits for the plant. Start it once the probe sees the status
+        # writer, so that discovery cannot lag behind a flight already past the modes awaited.
+        assert probe.spin_until(
+            lambda: probe.node.count_publishers(names.CONTROLLER_STATUS) > 0, 30.0)
+        plant = start('uav_tilt_sim.plant_node', log_path=tmp_path / 'plant.log',
+                      params={'camera_enabled': 'false', 'status_rate_hz': 10.0})
+        assert probe.spin_until(
+            lambda: bool(probe.messages[names.PLANT_STATUS])
+            and ('HOVER' in modes or 'SEARCH' in modes), 120.0), modes
         # longer than a careless timeout (the default was 0.5 s), shorter than a dead node's
         controller.send_signal(signal.SIGSTOP)
         probe.spin_until(lambda: False, 0.5)          # commands in flight land
@@ -118,5 +125,5 @@ def test_a_stalled_controller_only_pauses_lockstep(tmp_path, probe):
     finally:
         controller.send_signal(signal.SIGCONT)
         code_c, _ = stop(controller)
-        code_p, _ = stop(plant)
+        code_p = stop(plant)[0] if plant is not None else None
     assert code_c == 0 and code_p == 0

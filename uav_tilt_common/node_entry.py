@@ -6,14 +6,16 @@ no traceback, as DESIGN section 3 says a node ends on them. Once imported, the n
 ``main`` (:func:`uav_tilt_common.ros_params.run_node`) takes them over.
 """
 import importlib
+import os
 import signal
-import sys
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-def _exit_quietly(signum, frame):
-    sys.exit(0)     # nothing runs yet that would need shutting down
+def _exit_quietly(signum: int, frame: object) -> None:
+    # Nothing runs yet that would need shutting down. Not sys.exit: the handler may run inside
+    # an extension's import (torch's), where a raised SystemExit aborts the process (SIGABRT).
+    os._exit(0)
 
 
 def _run(module):
