@@ -14,7 +14,10 @@ import pytest
 
 from ros_graph import REPO, alive, children
 
-FLY = ['fly', '--scenario', 'config/scenarios/default.yaml', '--target-source', 'ground_truth']
+# A hold of minutes: the flight outlasts the wait below however fast the machine flies it
+# (a ground-truth mission of a 5 s hold ends in about 7 s of wall time).
+FLY = ['fly', '--scenario', 'config/scenarios/default.yaml', '--target-source', 'ground_truth',
+       '--set', 'mission.contact.hold_time_s=300']
 CAMPAIGN = ['campaign', '--n', '2', '--workers', '1', '--duration', '60']
 RAY_CAMPAIGN = [*CAMPAIGN, '--backend', 'ray']
 

@@ -158,12 +158,18 @@ def test_one_answer_per_question(run):
     flown, reported, _, _ = run
     for summary in (flown, reported):
         first = summary['tasks'][0]
-        for key in ('hold_time_s', 'force_setpoint_n', 'force_mean_n', 'poi_error_m'):
+        for key in ('hold_time_s', 'force_setpoint_n', 'force_mean_n', 'poi_error_m',
+                    'tool_normal_angle_max_deg'):
             assert summary[key] == first[key], key
+        # an inclined wall too: the tool sits square, as an ultrasonic probe needs
+        assert first['tool_normal_angle_max_deg'] < 2.0
         assert summary['force_setpoint_n'] == FORCES_N[0]
         assert first['hold_time_s'] == pytest.approx(2.0 - 1.0 / 300, abs=1e-6)
     for mine, theirs in zip(reported['tasks'][:2], flown['tasks'][:2]):     # the touches
         assert mine['hold_time_s'] == pytest.approx(theirs['hold_time_s'], abs=1e-6)
+        # the report's samples are the F/T's, fly's every tick: the same attitudes
+        assert mine['tool_normal_angle_max_deg'] == pytest.approx(
+            theirs['tool_normal_angle_max_deg'], abs=0.05)
     assert reported['failure'] is None and flown['failure'] is None
 
 

@@ -291,13 +291,21 @@ def load_yaml(cls: type[ConfigT], path: str | os.PathLike[str],
     return from_dict(cls, data)
 
 
+BOOL_TAG = 'tag:yaml.org,2002:bool'
+
+
 class _UniqueKeyLoader(yaml.SafeLoader):
     """PyYAML's safe loader, refusing a key given twice in one mapping (it would keep the
-    last silently: a value written twice is a mistake the file's author wants to hear of)."""
+    last silently: a value written twice is a mistake the file's author wants to hear of),
+    and reading a key as written unless it is true or false: `on: pipe_1` is the key 'on',
+    as in YAML 1.2 (YAML 1.1 reads on, off, yes and no as booleans)."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> Any:
         seen = set()
         for key_node, _ in node.value:
+            if (key_node.tag == BOOL_TAG and isinstance(key_node.value, str)
+                    and key_node.value.lower() not in ('true', 'false')):
+                key_node.tag = 'tag:yaml.org,2002:str'
             if key_node.tag == 'tag:yaml.org,2002:merge':   # '<<': merged keys may be redone
                 continue
             key = self.construct_object(key_node, deep=True)

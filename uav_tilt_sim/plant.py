@@ -140,16 +140,14 @@ class Plant:
         return None if self.renderer is None else self.renderer.name
 
     def _starts_in_wall(self, tip_map):
-        """Whether the vehicle where it starts (its tool's tip at ``tip_map``) is in the wall
-        or an object on it, or its tool reaches through the wall's face: PyBullet would
-        throw it out, or it could not take off."""
-        bodies = [self.world.wall_body] + [o.body for o in self.world.objects]
+        """Whether the vehicle where it starts (its tool's tip at ``tip_map``) is in a
+        structure or an object on one, or its tool reaches through a wall's face: PyBullet
+        would throw it out, or it could not take off."""
+        bodies = [s.body for s in self.world.structures] + [o.body for o in self.world.objects]
         if any(p.getClosestPoints(self.body, body, 0.0, physicsClientId=self.client)
                for body in bodies):
             return True
-        wall = self.scenario.wall
-        u, v, out = (tip_map - self.world.wall_origin_map) @ self.world.R_map_wall
-        return out < 0.0 and abs(u) <= wall.width_m / 2 and 0.0 <= v <= wall.height_m
+        return self.world.reaches_into(tip_map)
 
     def close(self):
         """Release the renderer and the physics server."""

@@ -3,10 +3,14 @@ import dataclasses
 import os
 import re
 
+import numpy as np
+
 from uav_tilt_common import resources
-from uav_tilt_common.config import ConfigError, load_yaml, nested, param
+from uav_tilt_common.config import ConfigError, close_match, load_yaml, nested, param
 from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_common.targets import OBJECT_CLASSES
+from uav_tilt_sim.structures import (BOX_FACES, MESH, WALL, Placement, Structure,
+                                     StructureConfig, structure_of)
 from uav_tilt_sim.textures import OBJECT_SIZE_M
 
 # The scenario of an empty ``scenario_file``, relative to the package's files.
@@ -50,17 +54,31 @@ TARGET_CLASS = 'bolt_plate'
 
 @dataclasses.dataclass
 class ObjectConfig:
-    """An inspection object on the wall at (u right, v up) in the wall surface frame, metres;
-    a target (a bolt plate) may have an id, which a plan names it by."""
+    """An inspection object on a structure (the wall), at the surface coordinates of its
+    kind: (u right, v up) on a wall or a box's face, (axial, angle) on a cylinder, a point
+    snapped onto a mesh; a target (a bolt plate) may have an id, which a plan names it by."""
 
     cls: str = param('bolt_plate', choices=OBJECT_CLASSES,
                      doc=f'what it is: a {OBJECT_SIZE_M:g} m square panel; two panels may '
                          f'not overlap')
+    on: str = param('', doc="the id of the structure it is on ('': the first; the wall "
+                            "of a scenario without structures)")
     u_m: float = param(0.0, lo=-25.0, hi=25.0,
-                       doc="centre, right of position_m along the face (seen from its side); "
-                           "|u_m| <= wall.width_m / 2")
+                       doc="wall or box face: centre, right of position_m along the face "
+                           "(seen from its side); |u_m| <= wall.width_m / 2")
     v_m: float = param(1.5, lo=0.0, hi=20.0,
-                       doc='centre, up the face from the ground line; at most wall.height_m')
+                       doc="wall or box face: centre, up the face from its foot; at most "
+                           "wall.height_m")
+    face: str = param('-x', choices=BOX_FACES,
+                      doc="box: which face, by its outward normal in the box's own axes")
+    axial_m: float = param(0.0, lo=-25.0, hi=25.0,
+                           doc="cylinder: centre, along the axis from its middle")
+    angle_deg: float = param(0.0, lo=-180.0, hi=180.0,
+                             doc="cylinder: centre, about the axis from its side at heading "
+                                 "yaw_deg + 90 (0) towards the top (90)")
+    point_m: list = param([0.0, 0.0, 0.0], lo=-50.0, hi=50.0, length=3,
+                          doc="mesh: centre, in the mesh's metres and axes; snapped onto "
+                              "its surface")
     target: bool = param(False, doc='the target of the inspection (a bolt_plate; its point '
                                     'of interest is the bolt); an inspection needs one')
     id: str = param('', doc='name a plan and ground_truth/targets/<id> use (a letter, then '
@@ -107,7 +125,8 @@ class MismatchConfig:
 
 @dataclasses.dataclass
 class Scenario:
-    """One world: the wall, the inspection objects on it, the wind, the sensors' noise, how
+    """One world: the wall or the structures, the inspection objects on them, the wind, the
+    sensors' noise, how
     the simulated vehicle differs from the controller's model of it, where the vehicle
     starts, and the seed of its random streams."""
 
@@ -121,8 +140,11 @@ class Scenario:
     start_yaw_deg: float = param(0.0, lo=-180.0, hi=180.0,
                                  doc='heading of the vehicle at take-off (map, CCW from +x)')
     wall: WallConfig = nested(WallConfig)
+    structures: list = param([], items=StructureConfig,
+                             doc='the world\'s structures (walls, boxes, cylinders, meshes; '
+                                 'the structures[] table); none: the wall alone')
     objects: list = param([], items=ObjectConfig,
-                          doc='inspection objects on the wall (the objects[] table)')
+                          doc='inspection objects on the structures (the objects[] table)')
     wind: WindConfig = nested(WindConfig)
     noise: NoiseConfig = nested(NoiseConfig)
     mismatch: MismatchConfig = nested(MismatchConfig)
@@ -135,16 +157,26 @@ def load_scenario(path: str | os.PathLike[str] | None = None,
     """Load and validate a scenario YAML (empty path: the default scenario); a relative path
     as :func:`resources.resolve` finds it. ConfigError names ``parameter`` when the file is
     missing or unreadable."""
-    return check_scenario(load_yaml(Scenario, resources.resolve(path or DEFAULT_SCENARIO,
-                                                                parameter), parameter))
+    resolved = resources.resolve(path or DEFAULT_SCENARIO, parameter)
+    scenario = load_yaml(Scenario, resolved, parameter)
+    folder = os.path.dirname(os.path.abspath(resolved))
+    scenario.structures = [
+        dataclasses.replace(c, file=os.path.join(folder, c.file)) if c.file else c
+        for c in scenario.structures]
+    return check_scenario(scenario)
 
 
 def check_scenario(scenario: Scenario) -> Scenario:
-    """Checks across fields: the start stands in front of the wall's face and every object's
-    centre lies on the wall; targets are bolt plates; several targets need ids, and ids are
-    unique ROS name tokens; no two objects overlap. Returns the scenario. (Whether it has a
-    target is the mission's question: :func:`check_target`.)"""
-    _check_on_the_wall(scenario)
+    """Checks across fields: the start stands in front of the wall's face (with structures:
+    in none of them) and every object's centre lies on its structure's surface; structures
+    are not inside each other; targets are bolt plates; several targets need ids, and ids
+    are unique ROS name tokens; no two objects overlap. Returns the scenario. (Whether it
+    has a target is the mission's question: :func:`check_target`.)"""
+    if scenario.structures:
+        _check_structures(scenario)
+    else:
+        _check_on_the_wall(scenario)
+        world_geometry(scenario)        # the objects' `on`
     targets = [(i, o) for i, o in enumerate(scenario.objects) if o.target]
     for i, o in targets:
         if o.cls != TARGET_CLASS:
@@ -160,7 +192,8 @@ def check_scenario(scenario: Scenario) -> Scenario:
                               f"followed by letters, digits or '_'")
         if o.id and ids.count(o.id) > 1:
             raise ConfigError(f"parameter 'objects[{i}].id' = {o.id!r} is not unique")
-    _check_apart(scenario.objects)
+    if not scenario.structures:
+        _check_apart(scenario.objects)
     return scenario
 
 
@@ -207,6 +240,75 @@ def _check_on_the_wall(scenario: Scenario) -> None:
         if o.v_m > wall.height_m:
             raise ConfigError(f"parameter 'objects[{i}].v_m' = {o.v_m} is above the wall "
                               f"(wall.height_m = {wall.height_m})")
+
+
+def structures_of(scenario: Scenario) -> list[StructureConfig]:
+    """The scenario's structures: its ``structures``, or without any its wall (id 'wall')."""
+    if scenario.structures:
+        return list(scenario.structures)
+    w = scenario.wall
+    return [StructureConfig(id=WALL, kind=WALL, position_m=[*w.position_m, 0.0],
+                            yaw_deg=w.yaw_deg, inclination_deg=w.inclination_deg,
+                            width_m=w.width_m, height_m=w.height_m,
+                            stiffness_n_per_m=w.stiffness_n_per_m,
+                            damping_n_s_per_m=w.damping_n_s_per_m, friction=w.friction)]
+
+
+def world_geometry(scenario: Scenario) -> tuple[list[Structure], list[tuple[int, Placement]]]:
+    """The geometry of the scenario's structures, and for each object the index of its
+    structure and where it sits (ConfigError where one is off its surface)."""
+    structures = [structure_of(c, f'structures[{i}]')
+                  for i, c in enumerate(structures_of(scenario))]
+    ids = [s.cfg.id for s in structures]
+    placed = []
+    for i, o in enumerate(scenario.objects):
+        name = f'objects[{i}]'
+        if o.on and o.on not in ids:
+            close = close_match(o.on, ids)
+            hint = f" (did you mean {close!r}?)" if close else f" (structures: {', '.join(ids)})"
+            raise ConfigError(f"parameter '{name}.on' = {o.on!r} names no structure{hint}")
+        k = ids.index(o.on) if o.on else 0
+        placed.append((k, structures[k].place(o.face, o.u_m, o.v_m, o.axial_m, o.angle_deg,
+                                              o.point_m, OBJECT_SIZE_M, name)))
+    return structures, placed
+
+
+def _check_structures(scenario: Scenario) -> None:
+    # The wall group is the world of a scenario without structures: beside them it would
+    # be ignored, and a user who set it expects it built.
+    if scenario.wall != WallConfig():
+        raise ConfigError("parameters 'wall' and 'structures' are both set: list the wall "
+                          "among the structures (kind: wall)")
+    for i, c in enumerate(scenario.structures):
+        if not TARGET_ID.fullmatch(c.id):
+            raise ConfigError(f"parameter 'structures[{i}].id' = {c.id!r} must be a letter "
+                              f"followed by letters, digits or '_'")
+        if c.id in [d.id for d in scenario.structures[:i]]:
+            raise ConfigError(f"parameter 'structures[{i}].id' = {c.id!r} is not unique")
+        if c.kind == MESH and not c.file:
+            raise ConfigError(f"parameter 'structures[{i}].file' is empty: a mesh needs its "
+                              f"OBJ or STL file")
+    structures, placed = world_geometry(scenario)
+    for j, b in enumerate(structures):
+        for i, a in enumerate(structures):
+            if i != j and a.contains(b.centre_map())[0]:
+                raise ConfigError(f"parameter 'structures[{j}]' ({b.cfg.kind} "
+                                  f"{b.cfg.id!r}) lies inside 'structures[{i}]' ({a.cfg.kind} "
+                                  f"{a.cfg.id!r})")
+    start = np.asarray(scenario.start_xyz_m, dtype=float)
+    for i, a in enumerate(structures):
+        if a.contains(start)[0]:
+            raise ConfigError(f"parameter 'start_xyz_m' = {scenario.start_xyz_m} is inside "
+                              f"'structures[{i}]' ({a.cfg.kind} {a.cfg.id!r})")
+    for j, (kb, pb) in enumerate(placed):
+        for i, (ka, pa) in enumerate(placed[:j]):
+            d = pb.centre_map - pa.centre_map
+            if (ka == kb and abs(d @ pa.R_map_surface[:, 0]) < OBJECT_SIZE_M
+                    and abs(d @ pa.R_map_surface[:, 1]) < OBJECT_SIZE_M
+                    and abs(d @ pa.R_map_surface[:, 2]) < OBJECT_SIZE_M):
+                raise ConfigError(f"parameter 'objects[{j}]' overlaps 'objects[{i}]' on "
+                                  f"{structures[ka].cfg.id!r}: objects are {OBJECT_SIZE_M:g} "
+                                  f"m squares, their centres at least that far apart")
 
 
 def target_ids(scenario: Scenario) -> list[str]:

@@ -1,6 +1,7 @@
 """What the camera sees: visual shapes described once, drawn by either renderer.
 
-A :class:`Visual` (a textured rectangle, a box, a cylinder or a sphere in a link frame) makes
+A :class:`Visual` (a textured rectangle, a box, a cylinder, a sphere or a textured triangle
+mesh in a link frame) makes
 both the PyBullet visual shape that TinyRenderer draws and the triangle mesh that the GL
 renderer (:mod:`uav_tilt_sim.camera.gl`) draws. A :class:`Scene` lists the visuals of
 every body of one physics client by (body, link); the builders of the world, the vehicle
@@ -17,7 +18,7 @@ import numpy as np
 from uav_tilt_common.geometry import Vector
 from uav_tilt_sim.bullet import pybullet as p
 
-QUAD, BOX, CYLINDER, SPHERE = 'quad', 'box', 'cylinder', 'sphere'
+QUAD, BOX, CYLINDER, SPHERE, MESH = 'quad', 'box', 'cylinder', 'sphere', 'mesh'
 # Tessellation of round shapes for the GL renderer (TinyRenderer tessellates its own).
 ROUND_SEGMENTS = 24
 
@@ -30,7 +31,8 @@ class Visual:
     """One visual shape in its link frame.
 
     ``size``: quad (half width along x, half height along y; it faces +z), box (half
-    extents), cylinder (radius, length along z), sphere (radius,). A quad's texture row 0
+    extents), cylinder (radius, length along z), sphere (radius,), mesh (unused: its
+    triangles are ``arrays``, textured by their uvs). A quad's texture row 0
     lies at +y and column 0 at -x. ``tile_m`` splits a large quad into tiles of about that
     side (TinyRenderer drops a whole triangle whose vertices project far outside the image);
     ``texture_m`` repeats the texture every that many metres (default: once over the quad).
@@ -44,19 +46,26 @@ class Visual:
     quaternion: Sequence[float] = (0.0, 0.0, 0.0, 1.0)
     tile_m: float | None = None
     texture_m: float | None = None
+    arrays: Mesh | None = None
 
     def mesh(self) -> Mesh:
         """(vertices, normals, uvs, triangles) in the link frame, float32 / int32 arrays."""
-        builder = {QUAD: _quad_mesh, BOX: _box_mesh, CYLINDER: _cylinder_mesh,
-                   SPHERE: _sphere_mesh}[self.kind]
-        v, n, uv, tri = builder(self)
+        if self.kind == MESH:
+            assert self.arrays is not None
+            v, n, uv, tri = self.arrays
+        else:
+            builder = {QUAD: _quad_mesh, BOX: _box_mesh, CYLINDER: _cylinder_mesh,
+                       SPHERE: _sphere_mesh}[self.kind]
+            v, n, uv, tri = builder(self)
         R = np.array(p.getMatrixFromQuaternion(self.quaternion)).reshape(3, 3)
         return ((v @ R.T + np.asarray(self.position)).astype(np.float32),
                 (n @ R.T).astype(np.float32), uv.astype(np.float32), tri.astype(np.int32))
 
 
-def _quad_grid(half_w: float, half_h: float, tile_m: float | None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def quad_grid(half_w: float, half_h: float, tile_m: float | None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices, uvs, triangles) of a quad in the xy plane split into tiles of about
+    ``tile_m`` (one without), its triangles counter-clockwise seen from +z."""
     nx = max(1, int(np.ceil(2 * half_w / tile_m))) if tile_m else 1
     ny = max(1, int(np.ceil(2 * half_h / tile_m))) if tile_m else 1
     u, v = np.meshgrid(np.linspace(0.0, 1.0, nx + 1), np.linspace(0.0, 1.0, ny + 1))
@@ -71,7 +80,7 @@ def _quad_grid(half_w: float, half_h: float, tile_m: float | None
 
 def _quad_mesh(visual: Visual) -> Mesh:
     half_w, half_h = visual.size
-    vertices, uvs, triangles = _quad_grid(half_w, half_h, visual.tile_m)
+    vertices, uvs, triangles = quad_grid(half_w, half_h, visual.tile_m)
     if visual.texture_m:
         uvs = uvs * 2 * np.asarray(visual.size) / visual.texture_m
     # PyBullet's texture coordinate v runs from texture row 0 at v = 1 (it flips images).
@@ -89,9 +98,9 @@ def _box_mesh(visual: Visual) -> Mesh:
             a, b = (axis + 1) % 3, (axis + 2) % 3
             x_dir, y_dir = np.eye(3)[a], np.eye(3)[b] * sign
             R = np.column_stack([x_dir, y_dir, np.cross(x_dir, y_dir)])
-            v, uv, tri = _quad_grid(1.0, 1.0, None)
+            v, uv, tri = quad_grid(1.0, 1.0, None)
             parts.append(((v @ R.T + normal) * half, np.tile(normal, (4, 1)), uv, tri))
-    return _concat(parts)
+    return concat(parts)
 
 
 def _cylinder_mesh(visual: Visual) -> Mesh:
@@ -111,7 +120,7 @@ def _cylinder_mesh(visual: Visual) -> Mesh:
         cap_tri = np.column_stack([np.zeros_like(j), j, nxt] if sign > 0
                                   else [np.zeros_like(j), nxt, j])
         parts.append((cap_v, np.tile([0, 0, sign], (n, 1)), np.zeros((n, 2)), cap_tri))
-    return _concat(parts)
+    return concat(parts)
 
 
 def _sphere_mesh(visual: Visual) -> Mesh:
@@ -127,7 +136,8 @@ def _sphere_mesh(visual: Visual) -> Mesh:
     return normals * radius, normals, np.zeros((len(normals), 2)), tri
 
 
-def _concat(parts: Iterable[Mesh]) -> Mesh:
+def concat(parts: Iterable[Mesh]) -> Mesh:
+    """One mesh of several (vertices, normals, uvs, triangles)."""
     out: list[list[np.ndarray]] = [[], [], [], []]
     offset = 0
     for v, n, uv, tri in parts:
@@ -142,11 +152,11 @@ def pybullet_shape(client: int, visuals: Sequence[Visual]) -> int:
     """PyBullet visual shape (for TinyRenderer) of one or more visuals of a link."""
     shapes: list[dict[str, Any]] = []
     for v in visuals:
-        if v.kind == QUAD:
-            vertices, _, uvs, tri = v.mesh()
+        if v.kind in (QUAD, MESH):
+            vertices, normals, uvs, tri = v.mesh()
             shapes.append(dict(shapeType=p.GEOM_MESH, vertices=vertices.tolist(),
                                indices=tri.ravel().tolist(), uvs=uvs.tolist(),
-                               normals=[[0, 0, 1]] * len(vertices)))
+                               normals=normals.tolist()))
             continue
         if v.kind == BOX:
             kwargs = dict(shapeType=p.GEOM_BOX, halfExtents=list(v.size))

@@ -63,9 +63,14 @@ def scenario_page() -> str:
         "and its objects: the plant, `fly` and `campaign --scenario` refuse it before "
         "anything flies.",
         "- Every object's centre lies on the wall: `|u_m| <= wall.width_m / 2`, "
-        "`v_m <= wall.height_m`.",
+        "`v_m <= wall.height_m`; on its structure's surface (`on`), at the surface "
+        "coordinates of its kind; a mesh's `point_m` within half a panel of it.",
         f"- Objects are {OBJECT_SIZE_M:g} m squares: two whose centres are less than "
         f"{OBJECT_SIZE_M:g} m apart along both u and v overlap, and are refused.",
+        "- With `structures`, `wall` is not set (list the wall among them); ids are unique; "
+        "a mesh's file is a closed OBJ or STL surface; no structure's middle lies inside "
+        "another, and the start lies inside none. A panel on a cylinder wraps round it, so "
+        f"its radius is at least {OBJECT_SIZE_M:g} / pi m.",
         f"- Targets are `{TARGET_CLASS}`s (their point of interest is the bolt); with more than "
         f"one, each needs an `id`; ids are unique.",
         "- An inspection needs a target: `uav-tilt fly` without `--plan`, `scripts/launch.sh "

@@ -90,7 +90,8 @@ class ContactConfig:
     standoff_m: float = param(0.6, lo=0.1, hi=5.0)          # tool tip to surface
     approach_speed_m_s: float = param(0.3, lo=0.05, hi=2.0)
     pitch_to_normal: bool = param(True)                     # align the tool with the normal
-    max_pitch_rad: float = param(0.5, lo=0.0, hi=1.0)
+    # 31 deg: square on every surface a scenario inclines (a wall's +-30 deg), a degree spare
+    max_pitch_rad: float = param(0.54, lo=0.0, hi=1.0)
     close_speed_m_s: float = param(0.2, lo=0.01, hi=0.5)
     touch_margin_m: float = param(0.05, lo=0.0, hi=0.5)
     touch_speed_m_s: float = param(0.01, lo=0.001, hi=0.2)

@@ -245,13 +245,14 @@ def world(rec: Recording) -> dict[str, Any] | None:
 
 
 def wrench_series(rec: Recording, tool_tip_x_m: float
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t_s, tool tips (N, 3), F/T force on the vehicle (N, 3)) in map, of each ee_wrench
-    with the vehicle's ground-truth pose at its stamp."""
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t_s, tool tips (N, 3), F/T force on the vehicle (N, 3), tool axes (N, 3)) in map, of
+    each ee_wrench with the vehicle's ground-truth pose at its stamp."""
     poses = vehicle_poses(rec)
     t: list[float] = []
     tips: list[np.ndarray] = []
     forces: list[np.ndarray] = []
+    axes: list[np.ndarray] = []
     for _, m in rec.get(names.EE_WRENCH, ()):
         pose = poses.get(stamp_ns(m.header.stamp))
         if pose is None:
@@ -260,7 +261,9 @@ def wrench_series(rec: Recording, tool_tip_x_m: float
         t.append(stamp_s(m))
         tips.append(pose[0] + pose[1][:, 0] * tool_tip_x_m)
         forces.append(pose[1] @ np.array([f.x, f.y, f.z]))
-    return np.array(t), np.array(tips).reshape(-1, 3), np.array(forces).reshape(-1, 3)
+        axes.append(pose[1][:, 0])
+    return (np.array(t), np.array(tips).reshape(-1, 3), np.array(forces).reshape(-1, 3),
+            np.array(axes).reshape(-1, 3))
 
 
 def vehicle_poses(rec: Recording) -> dict[int, Pose3]:
@@ -271,13 +274,22 @@ def vehicle_poses(rec: Recording) -> dict[int, Pose3]:
 
 def tool_tips(rec: Recording, tool_tip_x_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(t_s, tip positions (N, 3)) of the tool tip in map from ground_truth/odom."""
+    t, tips, _ = tool_poses(rec, tool_tip_x_m)
+    return t, tips
+
+
+def tool_poses(rec: Recording, tool_tip_x_m: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t_s, tip positions (N, 3), tool axes (N, 3)) in map from ground_truth/odom."""
     t: list[float] = []
     tips: list[np.ndarray] = []
+    axes: list[np.ndarray] = []
     for _, m in rec.get(names.GROUND_TRUTH_ODOM, ()):
         p, R = _pose(m.pose.pose)
         t.append(stamp_s(m))
         tips.append(p + R[:, 0] * tool_tip_x_m)
-    return np.array(t), np.array(tips).reshape(-1, 3)
+        axes.append(R[:, 0])
+    return np.array(t), np.array(tips).reshape(-1, 3), np.array(axes).reshape(-1, 3)
 
 
 def contact_forces(rec: Recording) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -25,12 +25,11 @@ from std_msgs.msg import String
 
 from uav_tilt_common import names, ros_msgs, ros_qos
 from uav_tilt_common.config import ConfigError, param
-from uav_tilt_common.geometry import wall_rotation
 from uav_tilt_common.ros_params import declare_config, run_node
 from uav_tilt_common.targets import is_no_target
 from uav_tilt_common.vehicle import VehicleParams
-from uav_tilt_sim.scenario import load_scenario
-from uav_tilt_sim.world import WALL_THICKNESS_M
+from uav_tilt_sim.scenario import Scenario, load_scenario, structures_of
+from uav_tilt_sim.structures import BOX, CYLINDER, WALL, WALL_THICKNESS_M, structure_of
 
 try:
     import foxglove
@@ -107,6 +106,65 @@ def _sphere(p: Vec, diameter: float, color: 'fm.Color') -> 'fm.SpherePrimitive':
     return fm.SpherePrimitive(pose=_pose(p), size=_vector([diameter] * 3), color=color)
 
 
+@dataclasses.dataclass
+class Shape:
+    """One structure as the live view draws it, in map: a ``cube`` or a ``cylinder`` (about
+    its z) of ``size`` centred at ``position``, or a mesh's ``triangles``
+    (``points`` indexed by ``indices``, in its frame at ``position``)."""
+
+    entity_id: str
+    primitive: str
+    position: np.ndarray
+    quaternion: np.ndarray
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    points: np.ndarray | None = None
+    indices: np.ndarray | None = None
+
+
+def structure_shapes(scenario: Scenario) -> list[Shape]:
+    """The scenario's structures, one shape each (id ``structure:<id>``; a world without
+    structures: its wall, id ``wall``)."""
+    shapes = []
+    for i, cfg in enumerate(structures_of(scenario)):
+        g = structure_of(cfg, f'structures[{i}]')
+        q = Rotation.from_matrix(g.R).as_quat()
+        entity_id = 'wall' if not scenario.structures else f'structure:{cfg.id}'
+        if cfg.kind == WALL:
+            centre = g.position + g.R[:, 1] * cfg.height_m / 2 - g.R[:, 2] * WALL_THICKNESS_M / 2
+            shapes.append(Shape(entity_id, 'cube', centre, q,
+                                (cfg.width_m, cfg.height_m, WALL_THICKNESS_M)))
+        elif cfg.kind == BOX:
+            shapes.append(Shape(entity_id, 'cube', g.position + g.R[:, 2] * cfg.size_m[2] / 2,
+                                q, tuple(cfg.size_m)))
+        elif cfg.kind == CYLINDER:
+            d = 2 * cfg.radius_m
+            shapes.append(Shape(entity_id, 'cylinder', g.position, q, (d, d, cfg.length_m)))
+        else:
+            assert g.mesh is not None
+            shapes.append(Shape(entity_id, 'triangles', g.position, q,
+                                points=g.mesh.vertices, indices=g.mesh.faces.ravel()))
+    return shapes
+
+
+def _entity(shape: Shape, stamp: 'fm.Timestamp') -> 'fm.SceneEntity':
+    colour = _color(0.7, 0.7, 0.7, 0.6)
+    pose = _pose(shape.position, shape.quaternion)
+    if shape.primitive == 'cube':
+        kwargs: dict[str, Any] = {'cubes': [fm.CubePrimitive(pose=pose, size=_vector(shape.size),
+                                                             color=colour)]}
+    elif shape.primitive == 'cylinder':
+        kwargs = {'cylinders': [fm.CylinderPrimitive(pose=pose, size=_vector(shape.size),
+                                                     bottom_scale=1.0, top_scale=1.0,
+                                                     color=colour)]}
+    else:
+        assert shape.points is not None and shape.indices is not None
+        kwargs = {'triangles': [fm.TriangleListPrimitive(
+            pose=pose, color=colour, indices=[int(k) for k in shape.indices],
+            points=[fm.Point3(x=float(x), y=float(y), z=float(z)) for x, y, z in shape.points])]}
+    return fm.SceneEntity(timestamp=stamp, frame_id=names.FRAME_MAP, id=shape.entity_id,
+                          **kwargs)
+
+
 def _normal_arrow(p: Vec, q: Vec, color: 'fm.Color') -> 'fm.ArrowPrimitive':
     """An arrow along +z of the frame (p, q): the surface normal of a target."""
     q_arrow = (Rotation.from_quat(q) * Rotation.from_euler('y', -np.pi / 2)).as_quat()
@@ -168,18 +226,11 @@ class FoxgloveBridge(Node):
 
     # --- static scene: wall, vehicle body and tool ---------------------------------------
     def on_static(self) -> None:
-        """Wall in map, body and tool in base_link, and the fixed frames of the vehicle."""
+        """Structures in map, body and tool in base_link, and the fixed frames of the vehicle."""
         stamp = fm.Timestamp(sec=0)
-        wall = self.scenario.wall
-        R = wall_rotation(wall.yaw_deg, wall.inclination_deg)
-        origin = np.array([wall.position_m[0], wall.position_m[1], 0.0])
-        centre = origin + R[:, 1] * wall.height_m / 2 - R[:, 2] * WALL_THICKNESS_M / 2
-        q_wall = Rotation.from_matrix(R).as_quat()
         v = self.vehicle
         entities = [
-            fm.SceneEntity(timestamp=stamp, frame_id=names.FRAME_MAP, id='wall', cubes=[
-                _cube(centre, q_wall, (wall.width_m, wall.height_m, WALL_THICKNESS_M),
-                      _color(0.7, 0.7, 0.7, 0.6))]),
+            *(_entity(shape, stamp) for shape in structure_shapes(self.scenario)),
             fm.SceneEntity(timestamp=stamp, frame_id=names.FRAME_BASE, id='vehicle',
                            frame_locked=True, cubes=[
                                _cube((0, 0, 0), (0, 0, 0, 1),

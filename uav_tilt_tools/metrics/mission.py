@@ -14,6 +14,9 @@ true tool tip. Each key means one thing (DESIGN section 7):
 - ``poi_error_m``, ``poi_error_max_m``: mean and largest distance from the true tool tip
   to the true point of interest over HOLD, along the surface (a wall that gives way lets the
   tip sink in along the normal; that depth is not an error of where it touches).
+- ``tool_normal_angle_deg``, ``tool_normal_angle_max_deg``: mean and largest angle over
+  HOLD between the tool's axis (base_link x, true attitude) and the true surface normal,
+  into the surface: a probe that reads only when it sits square needs it small.
 - ``hold_time_s``: sim time in HOLD, each run from its first sample to its last (with a
   plan, :func:`metrics.tasks.with_tasks` puts the first touch's here, which is measured the
   same way over its hold window); ``mission_time_s``: from leaving IDLE to being
@@ -30,6 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_tilt_common.modes import NOT_FLYING, Mode
+from uav_tilt_control import frames
 
 # (t_s, mode) samples of the controller's mode, and the (t_first, t_last) runs of one mode
 ModeSamples = list[tuple[float, Any]]
@@ -37,7 +41,8 @@ Runs = list[tuple[float, float]]
 
 MISSION_KEYS = ('success', 'poi_error_m', 'poi_error_max_m', 'force_setpoint_n',
                 'force_mean_n', 'force_rms_error_n', 'max_force_n', 'contact_lost',
-                'hold_time_s', 'mission_time_s')
+                'tool_normal_angle_deg', 'tool_normal_angle_max_deg', 'hold_time_s',
+                'mission_time_s')
 
 
 def mode_samples(statuses: Iterable[tuple[float, dict[str, Any]]]) -> ModeSamples:
@@ -103,6 +108,15 @@ def poi_errors_m(tips_map: npt.ArrayLike, poi_map: npt.ArrayLike,
     return np.linalg.norm(offsets, axis=1)
 
 
+def tool_normal_angles_deg(tool_axes_map: npt.ArrayLike, normal_map: npt.ArrayLike
+                           ) -> np.ndarray:
+    """Angle [deg] between each tool axis (N, 3; unit, pointing from the vehicle to the tip)
+    and the inward surface normal -``normal_map``."""
+    axes = np.asarray(tool_axes_map, dtype=float).reshape(-1, 3)
+    cosine = axes @ -frames.unit(normal_map) / np.linalg.norm(axes, axis=1)
+    return np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+
+
 def mission_time_s(modes: Sequence[tuple[float, Any]]) -> float | None:
     """Sim time from leaving IDLE to being back in IDLE (or the last sample); None if the
     vehicle never flew."""
@@ -117,13 +131,15 @@ def mission_time_s(modes: Sequence[tuple[float, Any]]) -> float | None:
 def mission_summary(modes: Sequence[tuple[float, Any]], status: dict[str, Any],
                     t_push: npt.ArrayLike, push_n: npt.ArrayLike, t_tip: npt.ArrayLike,
                     tips_map: npt.ArrayLike, poi_map: npt.ArrayLike | None,
-                    normal_map: npt.ArrayLike | None = None) -> dict[str, Any]:
+                    normal_map: npt.ArrayLike | None = None,
+                    tool_axes_map: npt.ArrayLike | None = None) -> dict[str, Any]:
     """The MISSION_KEYS dict; None where the inputs lack the data.
 
     ``modes``: [(t_s, mode)]; ``status``: the controller's last status {key: value};
     ``t_push``, ``push_n``: F/T push samples (:func:`push_along_normal`); ``t_tip``,
     ``tips_map``: true tool tip positions (N, 3); ``poi_map``: the true POI or None, and
-    ``normal_map`` the surface normal there.
+    ``normal_map`` the surface normal there; ``tool_axes_map``: the true tool axis at each
+    tool tip sample (N, 3), or None.
     """
     hold = runs_of_mode(modes, Mode.HOLD)
     push_n = np.asarray(push_n, dtype=float)
@@ -132,6 +148,10 @@ def mission_summary(modes: Sequence[tuple[float, Any]], status: dict[str, Any],
     errors = np.zeros(0)
     if poi_map is not None:
         errors = poi_errors_m(tips_map[inside(t_tip, hold)], poi_map, normal_map)
+    angles = np.zeros(0)
+    if tool_axes_map is not None and normal_map is not None:
+        axes = np.asarray(tool_axes_map, dtype=float).reshape(-1, 3)[inside(t_tip, hold)]
+        angles = tool_normal_angles_deg(axes, normal_map) if len(axes) else angles
     setpoint = json_number(status.get('contact_force_n'))
     success, lost = status.get('success'), json_number(status.get('contact_lost'))
     summary = dict(
@@ -144,6 +164,8 @@ def mission_summary(modes: Sequence[tuple[float, Any]], status: dict[str, Any],
                            if len(held) and setpoint is not None else None),
         max_force_n=float(push_n.max()) if len(push_n) else None,
         contact_lost=int(lost) if lost is not None else None,
+        tool_normal_angle_deg=float(angles.mean()) if len(angles) else None,
+        tool_normal_angle_max_deg=float(angles.max()) if len(angles) else None,
         hold_time_s=float(sum(t1 - t0 for t0, t1 in hold)) if hold else None,
         mission_time_s=mission_time_s(modes),
     )

@@ -8,9 +8,11 @@ reason, contact_lost, t_contact_s = [start, end] of HOLD or SLIDE, ...).
 
 - touch: over the hold, the tool tip's distance from the target's point of interest along
   the surface (``poi_error_m``, ``poi_error_max_m``), the push's mean and RMS error against
-  the task's force; a touch the controller completed that misses the inspection bar
-  (:func:`missed_bar`), or that nothing could score (no truth of its target, no push
-  measured: 'unscored'), is no success, its reason the bar's;
+  the task's force, the tool axis's angle from the surface normal
+  (``tool_normal_angle_deg``, ``tool_normal_angle_max_deg``); a touch the controller
+  completed that misses the inspection bar (:func:`missed_bar`), or that nothing could
+  score (no truth of its target, no push measured: 'unscored'), is no success, its reason
+  the bar's;
 - slide: over the slide, the push's RMS error, the tool tip's distance from the requested
   line in the wall's plane (``path_rms_error_m``, ``path_max_error_m``), the length of line
   it covered, measured along the line as the mission measures it (``length_m``,
@@ -27,6 +29,7 @@ import numpy.typing as npt
 from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
 from uav_tilt_control.plan import LineProgress
+from uav_tilt_tools.metrics.mission import tool_normal_angles_deg
 
 # The inspection bar (DESIGN section 7): over the hold, the true tool tip within 1 cm of the
 # point of interest along the surface, and the push within 0.1 N mean and 0.2 N RMS of the
@@ -43,17 +46,21 @@ Truth = tuple[np.ndarray, np.ndarray]
 
 def task_results(tasks: Iterable[dict[str, Any]], t_s: npt.ArrayLike, tip_map: npt.ArrayLike,
                  force_map: npt.ArrayLike, targets: dict[str, Truth] | None = None,
-                 wall_normal_map: npt.ArrayLike | None = None) -> list[dict[str, Any]]:
+                 wall_normal_map: npt.ArrayLike | None = None,
+                 tool_axis_map: npt.ArrayLike | None = None) -> list[dict[str, Any]]:
     """One dict per task.
 
     ``tasks``: controller/plan's task entries; ``t_s`` (N,), ``tip_map`` (N, 3),
-    ``force_map`` (N, 3): the truth on one time base; ``targets``: target id ('' = the
-    first target) -> (poi_map, R_map_target) of the truth; ``wall_normal_map``: the true
-    outward normal of the wall (None: the plan's, i.e. the site's).
+    ``force_map`` (N, 3), ``tool_axis_map`` (N, 3, the tool's axis; None: not known): the
+    truth on one time base; ``targets``: target id ('' = the first target) ->
+    (poi_map, R_map_target) of the truth; ``wall_normal_map``: the true outward normal of
+    the wall (None: the plan's, i.e. the site's).
     """
     t_s = np.asarray(t_s, dtype=float)
     tip_map = np.asarray(tip_map, dtype=float).reshape(-1, 3)
     force_map = np.asarray(force_map, dtype=float).reshape(-1, 3)
+    axes = None if tool_axis_map is None else np.asarray(tool_axis_map,
+                                                         dtype=float).reshape(-1, 3)
     out = []
     for task in tasks:
         entry = dict(index=task.get('index'), kind=task['kind'],
@@ -64,7 +71,8 @@ def task_results(tasks: Iterable[dict[str, Any]], t_s: npt.ArrayLike, tip_map: n
         if task['kind'] == 'touch':
             entry.update(target=task.get('target', ''),
                          **_touch(task, t_s[mask], tip_map[mask], force_map[mask],
-                                  (targets or {}).get(task.get('target', '')), wall_normal_map))
+                                  (targets or {}).get(task.get('target', '')), wall_normal_map,
+                                  None if axes is None else axes[mask]))
         else:
             normal = _normal(task, wall_normal_map)
             entry.update(_slide(task, t_s[mask], tip_map[mask], force_map[mask] @ normal,
@@ -159,8 +167,10 @@ def _force_stats(push: np.ndarray, force_n: float) -> dict[str, float | None]:
 
 
 def _touch(task: dict[str, Any], t_s: np.ndarray, tips: np.ndarray, forces: np.ndarray,
-           truth: Truth | None, wall_normal_map: npt.ArrayLike | None) -> dict[str, Any]:
+           truth: Truth | None, wall_normal_map: npt.ArrayLike | None,
+           axes: np.ndarray | None) -> dict[str, Any]:
     out = dict(poi_error_m=None, poi_error_max_m=None, hold_time_s=None, hold_tip_map=None,
+               tool_normal_angle_deg=None, tool_normal_angle_max_deg=None,
                **_force_stats(np.zeros(0), 0.0))
     if truth is not None:
         normal = truth[1][:, 2]
@@ -176,6 +186,10 @@ def _touch(task: dict[str, Any], t_s: np.ndarray, tips: np.ndarray, forces: np.n
         offsets = tips - truth[0]
         errors = np.linalg.norm(offsets - np.outer(offsets @ normal, normal), axis=1)
         out.update(poi_error_m=float(errors.mean()), poi_error_max_m=float(errors.max()))
+        if axes is not None:
+            angles = tool_normal_angles_deg(axes, normal)
+            out.update(tool_normal_angle_deg=float(angles.mean()),
+                       tool_normal_angle_max_deg=float(angles.max()))
     return out
 
 
@@ -223,7 +237,8 @@ def _slide(task: dict[str, Any], t_s: np.ndarray, tips: np.ndarray, push: np.nda
 
 # The first touch's keys that summary.json also has at its top level (metrics.mission).
 FIRST_TOUCH_KEYS = ('poi_error_m', 'poi_error_max_m', 'force_setpoint_n', 'force_mean_n',
-                    'force_rms_error_n', 'hold_time_s', 'hold_tip_map')
+                    'force_rms_error_n', 'tool_normal_angle_deg', 'tool_normal_angle_max_deg',
+                    'hold_time_s', 'hold_tip_map')
 
 
 def with_tasks(summary: dict[str, Any], tasks: Sequence[dict[str, Any]] | None

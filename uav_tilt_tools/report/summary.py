@@ -64,11 +64,11 @@ def summarize(rec: Recording, tool_tip_x_m: float) -> dict[str, Any]:
     last = ctrl[-1][1] if ctrl else {}
     vision = reader.statuses(rec, names.VISION_STATUS)
     t_push, push, _ = reader.contact_forces(rec)
-    t_tip, tips = reader.tool_tips(rec, tool_tip_x_m)
+    t_tip, tips, axes = reader.tool_poses(rec, tool_tip_x_m)
     target = reader.target_pose(rec)
-    summary = mission_summary(mode_samples(ctrl), last, t_push, push, t_tip, tips,
-                              *(target[0], target[1][:, 2]) if target is not None
-                              else (None, None))
+    poi, normal = (target[0], target[1][:, 2]) if target is not None else (None, None)
+    summary = mission_summary(mode_samples(ctrl), last, t_push, push, t_tip, tips, poi,
+                              normal, tool_axes_map=axes)
     summary.update(
         rtf=per_wall_second(reader.statuses(rec, names.PLANT_STATUS), 'sim_time_s',
                             from_first_count=True),
@@ -114,4 +114,5 @@ def task_summaries(rec: Recording, tool_tip_x_m: float) -> list[dict[str, Any]] 
         return None
     targets = reader.target_poses(rec)
     normal = targets[''][1][:, 2] if '' in targets else None
-    return task_results(tasks, *reader.wrench_series(rec, tool_tip_x_m), targets, normal)
+    t_s, tips, forces, axes = reader.wrench_series(rec, tool_tip_x_m)
+    return task_results(tasks, t_s, tips, forces, targets, normal, tool_axis_map=axes)

@@ -217,7 +217,7 @@ def plot_slides(rec: Recording, tool_tip_x_m: float, tasks: list[ReportTask]
                 ) -> Figure | None:
     """One row per slide of the recorded plan; None without a slide."""
     slides = [task.record for task in tasks if task.kind == 'slide']
-    t_s, tips, forces = reader.wrench_series(rec, tool_tip_x_m)
+    t_s, tips, forces, _ = reader.wrench_series(rec, tool_tip_x_m)
     if not slides or not len(t_s):
         return None
     targets = reader.target_poses(rec)

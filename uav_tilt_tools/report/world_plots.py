@@ -13,8 +13,10 @@ each target by its id), the vehicle's and the tool tip's true paths, and the pla
   outward normal, height): the wall's inclination, the approach.
 
 A recording without plant/scenario (made before it was published) gets the targets of its
-ground truth and no wall. The artists a test reads carry a ``gid``: ``wall``,
-``target:<id>`` (a target's marker; '' for an unnamed first target), ``object:<i>``.
+ground truth and no wall; a world of structures without a wall gets the top view only,
+each structure's outline in it. The artists a test reads carry a ``gid``: ``wall``,
+``structure:<id>``, ``target:<id>`` (a target's marker; '' for an unnamed first target),
+``object:<i>``.
 """
 from typing import Any
 
@@ -68,7 +70,7 @@ def plot_trajectory(rec: Recording, tool_tip_x_m: float, tasks: list[ReportTask]
         return None
     body = np.array([p for p, _ in poses.values()]).reshape(-1, 3)
     t_tip, tips = reader.tool_tips(rec, tool_tip_x_m)
-    view = WallView(world['wall']) if world is not None else None
+    view = WallView(world['wall']) if world is not None and world['wall'] else None
     targets = _targets(rec, world)
     fig, (ax_top, ax_face, ax_side) = plt.subplots(1, 3, figsize=(16, 5.2))
     _top_view(ax_top, view, world, targets, body, tips, tasks)
@@ -77,8 +79,9 @@ def plot_trajectory(rec: Recording, tool_tip_x_m: float, tasks: list[ReportTask]
         _section_view(ax_side, view, targets, body, tips)
     else:
         for ax in (ax_face, ax_side):
-            ax.text(0.5, 0.5, 'the world was not recorded (no plant/scenario)',
-                    ha='center', va='center', transform=ax.transAxes)
+            why = ('the world was not recorded (no plant/scenario)' if world is None
+                   else 'a world without a wall: the top view shows it')
+            ax.text(0.5, 0.5, why, ha='center', va='center', transform=ax.transAxes)
             ax.set_axis_off()
     fig.tight_layout()
     return fig
@@ -108,16 +111,27 @@ def _label_target(ax: Axes, target_id: str, xy: np.ndarray) -> None:
 def _top_view(ax: Axes, view: WallView | None, world: dict[str, Any] | None,
               targets: dict[str, np.ndarray], body: np.ndarray, tips: np.ndarray,
               tasks: list[ReportTask]) -> None:
+    walls = [s for s in (world or {}).get('structures', []) if s['kind'] == 'wall']
+    for s in (world or {}).get('structures', []):
+        if walls and s is walls[0]:
+            continue            # the wall below, with its size and pose
+        outline = np.asarray(s['footprint_map'], dtype=float)
+        outline = np.vstack([outline, outline[:1]])
+        low, high = s['height_range_m']
+        ax.fill(outline[:, 0], outline[:, 1], color='0.75', ec='k', lw=1.5,
+                gid=f"structure:{s['id']}",
+                label=f"{s['kind']} {s['id']} ({low:.1f}-{high:.1f} m high)")
+    if world is not None:
+        for i, obj in enumerate(world['objects']):
+            if not obj['target']:
+                ax.plot(*np.asarray(obj['centre_map'])[:2], 's', color='0.5', ms=6,
+                        gid=f'object:{i}', label=_once(ax, 'other object'))
     if view is not None and world is not None:
         outline = np.vstack([view.corners, view.corners[:1]])
         ax.plot(outline[:, 0], outline[:, 1], 'k-', lw=2.5, gid='wall',
                 label=f"wall ({view.width_m:g} x {view.height_m:g} m, yaw "
                       f"{world['wall']['yaw_deg']:g} deg, inclined "
                       f"{world['wall']['inclination_deg']:g} deg)")
-        for i, obj in enumerate(world['objects']):
-            if not obj['target']:
-                ax.plot(*np.asarray(obj['centre_map'])[:2], 's', color='0.5', ms=6,
-                        gid=f'object:{i}', label=_once(ax, 'other object'))
     if len(body):
         ax.plot(body[:, 0], body[:, 1], lw=1, label='vehicle')
         ax.plot(body[0, 0], body[0, 1], 'go', ms=6, label='start')

@@ -135,9 +135,10 @@ def mission_result(flight: Flight) -> dict[str, Any]:
     push = [push_along_normal(quat_to_matrix(e['q_map_base']), e['ft_force_ee_n'], R_surface)
             for e in log]
     normal = world.R_map_target[:, 2] if world.R_map_target is not None else None
+    axes = [quat_to_matrix(e['q_map_base'])[:, 0] for e in log]
     result = mission_summary(mode_samples([(e['t_s'], e) for e in log]), flight.status,
                              t_log, push, t_log, [e['tip_map'] for e in log],
-                             world.target_poi_map, normal)
+                             world.target_poi_map, normal, tool_axes_map=axes)
     reason = flight.status.get('failsafe_reason', '')
     events = flight.core.mission.events
     fired = [e for e in events if reason and e['reason'] == reason]
@@ -147,7 +148,8 @@ def mission_result(flight: Flight) -> dict[str, Any]:
     truths = world.truth_targets()
     force_map = [quat_to_matrix(e['q_map_base']) @ e['ft_force_ee_n'] for e in log]
     tasks = task_results(flight.core.plan_report()['tasks'], t_log,
-                         [e['tip_map'] for e in log], force_map, truths, world.R_map_wall[:, 2])
+                         [e['tip_map'] for e in log], force_map, truths, world.R_map_wall[:, 2],
+                         tool_axis_map=axes)
     result.update(failsafe_reason=reason,
                   # a transition's event names the mode it left, one within a mode the mode
                   failsafe_where=({'mode': fired[-1]['previous'] or fired[-1]['mode'],

@@ -1,5 +1,6 @@
 """The controller's site from a scenario, as a survey would give it: the wall and its
-target ids (uav_tilt_control.site.SiteConfig).
+target ids (uav_tilt_control.site.SiteConfig). A world of structures gives its first wall
+standing on the ground, or none.
 
 ``python -m uav_tilt_tools.runner.site_params [SCENARIO [MISSION]]`` prints them as ROS
 arguments, one word a line (``-p``, ``site.wall_yaw_deg:=0.0``, ...), for scripts/launch.sh;
@@ -10,20 +11,25 @@ import sys
 from typing import Any, Sequence
 
 from uav_tilt_common.config import ConfigError
-from uav_tilt_sim.scenario import Scenario, check_target, load_scenario, target_ids
+from uav_tilt_sim.scenario import (Scenario, check_target, load_scenario, structures_of,
+                                   target_ids)
+from uav_tilt_sim.structures import WALL
 
 
 def site_overrides(scenario: Scenario, hint_uv_m: Sequence[float] | None = None
                    ) -> dict[str, Any]:
     """Controller parameters that give it the scenario's wall and target ids as a survey
     would, and the hint (u, v on that wall) when there is one."""
-    wall = scenario.wall
-    out: dict[str, Any] = {'site.wall_position_m': [float(v) for v in wall.position_m],
-                           'site.wall_yaw_deg': float(wall.yaw_deg),
-                           'site.wall_inclination_deg': float(wall.inclination_deg),
-                           'site.wall_width_m': float(wall.width_m),
-                           'site.wall_height_m': float(wall.height_m),
-                           'site.target_ids': target_ids(scenario)}
+    out: dict[str, Any] = {'site.target_ids': target_ids(scenario)}
+    # the site's wall stands on the ground (its ground line's x, y)
+    wall = next((c for c in structures_of(scenario)
+                 if c.kind == WALL and c.position_m[2] == 0.0), None)
+    if wall is not None:
+        out.update({'site.wall_position_m': [float(v) for v in wall.position_m[:2]],
+                    'site.wall_yaw_deg': float(wall.yaw_deg),
+                    'site.wall_inclination_deg': float(wall.inclination_deg),
+                    'site.wall_width_m': float(wall.width_m),
+                    'site.wall_height_m': float(wall.height_m)})
     if hint_uv_m is not None:
         out['site.target_hint_uv_m'] = [float(v) for v in hint_uv_m]
     return out
