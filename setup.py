@@ -14,6 +14,7 @@ setup(
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/config/scenarios', glob('config/scenarios/*.yaml')),
+        ('share/' + PACKAGE + '/config/meshes', glob('config/meshes/*.obj')),
         ('share/' + PACKAGE + '/config/plans', glob('config/plans/*.yaml')),
         # the detectors and their cards: vision_node's model_path is relative to these
         ('share/' + PACKAGE + '/models', sorted(glob('models/*.onnx') + glob('models/*.pt')

@@ -8,7 +8,8 @@ import pytest
 from ros_graph import REPO
 
 KEYS = {
-    'sim': ('rtf_physics', 'rtf_camera', 'rtf_ros_lockstep'),
+    'sim': ('rtf_physics', 'rtf_camera', 'rtf_ros_lockstep', 'render_ms_p50_structures',
+            'render_ms_p50_structures_tinyrenderer'),
     'control': ('tick_us_p50', 'tick_us_p99', 'realtime_rate_hz', 'realtime_jitter_ms_p99'),
     'graph': ('rtf', 'controller_rate_hz', 'vision_fps', 'vision_latency_ms_p95',
               'realtime_rtf', 'realtime_controller_rate_hz', 'realtime_jitter_ms_p99',

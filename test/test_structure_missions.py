@@ -1,18 +1,23 @@
 """The inspection on structures (DESIGN section 5), in process with the ground truth of the
-target: each kind of structure, drawn fresh with a campaign's wind, noise, mismatch,
-stiffness and friction, inspected to the bar with the tool square on the surface; a touch
-the tool cannot sit square on refused before flight."""
+target: each kind of structure, drawn fresh as a campaign draws it (with its wind, noise,
+mismatch, stiffness and friction), inspected to the bar with the tool square on the surface;
+a touch the tool cannot sit square on refused before flight; a campaign of structure
+worlds."""
+import dataclasses
+import json
 import math
 
 import numpy as np
 import pytest
+import yaml
 
-from structure_worlds import kind_world, write_world
+from structure_worlds import i_beam
 from uav_tilt_common.config import ConfigError
 from uav_tilt_control.mission import MissionConfig
-from uav_tilt_sim.randomise import random_draw
+from uav_tilt_sim.randomise_structures import STRUCTURE_KINDS, structure_draw
 from uav_tilt_sim.scenario import load_scenario
 from uav_tilt_tools.metrics.tasks import FORCE_MEAN_BAR_N, FORCE_RMS_BAR_N, POI_BAR_M
+from uav_tilt_tools.runner import site_params
 from uav_tilt_tools.runner.fly import check_mission, fly
 
 pytestmark = pytest.mark.slow
@@ -20,21 +25,25 @@ pytestmark = pytest.mark.slow
 # An ultrasonic thickness probe reads only when it sits square: within this of the normal
 # (an airborne ultrasound inspection system reports 2.7 degrees).
 SQUARE_DEG = 2.0
-KINDS = ('pipe', 'tank', 'corner', 'pillar', 'mesh', 'wall')
 
 
 def fresh_seed():
     return int(np.random.SeedSequence().generate_state(1)[0] % 2**31)
 
 
-@pytest.mark.parametrize('kind', KINDS)
+@pytest.mark.parametrize('kind', STRUCTURE_KINDS)
 def test_each_kind_is_inspected_to_the_bar_square_on_its_surface(tmp_path, kind):
+    """A horizontal pipe of radius 0.15-0.5 m, the target within 30 deg of its side; an
+    upright pipe; a tank of radius 1-3 m; a corner of two walls at 90 deg, the target
+    within 0.4 m of the edge; a square pillar; an I-beam read from an OBJ file the test
+    writes; a campaign's wall (the angle is reported for walls too)."""
     seed = fresh_seed()
-    if kind == 'wall':      # a campaign's wall world: the angle is reported for it too
-        scenario, _ = random_draw(seed)
-    else:
-        scenario = load_scenario(write_world(tmp_path, *kind_world(
-            kind, np.random.default_rng(seed), tmp_path), seed=seed))
+    scenario, drawn_kind, _ = structure_draw(seed, kind)
+    assert drawn_kind == kind
+    if kind == 'mesh':
+        i_beam(tmp_path / 'beam.obj')
+        scenario = dataclasses.replace(scenario, structures=[
+            dataclasses.replace(scenario.structures[0], file=str(tmp_path / 'beam.obj'))])
     check_mission(scenario)         # as `uav-tilt fly` checks it before it flies
     result = fly(scenario, target_source='ground_truth')
     margins = dict(seed=seed, poi_m=POI_BAR_M - (result['poi_error_max_m'] or math.inf),
@@ -48,23 +57,44 @@ def test_each_kind_is_inspected_to_the_bar_square_on_its_surface(tmp_path, kind)
     assert result['tool_normal_angle_max_deg'] <= SQUARE_DEG, margins
 
 
-def test_a_pipe_s_top_and_underside_are_refused_with_the_reachable_range(tmp_path):
+def test_a_pipe_s_top_and_underside_are_refused_with_the_reachable_range(tmp_path, capsys):
     """The tool pushes along the body's forward axis, which pitches at most
     contact.max_pitch_rad: a target on the top or the underside of a pipe is refused
-    before anything flies, the message giving the range; one on its side is flown."""
+    before anything flies (fly, campaign, launch.sh's inspection), the message giving the
+    range; one on its side is flown."""
     limit_deg = math.degrees(MissionConfig().contact.max_pitch_rad)
     rng = np.random.default_rng(fresh_seed())
-    structures, objects = kind_world('pipe', rng, tmp_path)
+    scenario, _, _ = structure_draw(fresh_seed(), 'pipe')
+    data = dataclasses.asdict(scenario)
     for angle, refused in ((rng.uniform(limit_deg + 1, 90), True),
                            (-rng.uniform(limit_deg + 1, 90), True),
                            (rng.uniform(-limit_deg + 1, limit_deg - 1), False)):
-        objects[0]['angle_deg'] = float(angle)
-        scenario = load_scenario(write_world(tmp_path, structures, objects))
+        data['objects'][0]['angle_deg'] = float(angle)
+        path = tmp_path / 'world.yaml'
+        path.write_text(yaml.safe_dump(data))
+        scenario = load_scenario(path)
+        assert site_params.main([str(path), 'inspect']) == (2 if refused else 0)
         if not refused:
             check_mission(scenario)
             continue
+        assert 'within' in capsys.readouterr().err
         with pytest.raises(ConfigError) as err:
             check_mission(scenario)
         message = str(err.value)
         assert f'{abs(angle):.1f} deg {"up" if angle > 0 else "down"}' in message
         assert f'within {limit_deg:.1f} deg of horizontal' in message
+
+
+def test_a_campaign_of_structures_meets_the_bar_and_counts_by_kind(tmp_path):
+    """`uav-tilt campaign --structures`: 20 fresh draws of every kind, ground truth, at
+    least 95% meet the inspection bar; the JSON counts runs and successes by kind."""
+    from uav_tilt_tools.campaign.run import campaign
+    result = campaign(20, fresh_seed(), progress=False, structures=True)
+    print(json.dumps({k: result[k] for k in ('seed', 'successes', 'by_structure')}))
+    assert result['structures'] is True
+    by_kind = result['by_structure']
+    assert set(by_kind) <= set(STRUCTURE_KINDS)
+    assert sum(v['n'] for v in by_kind.values()) == 20
+    assert sum(v['successes'] for v in by_kind.values()) == result['successes']
+    assert {r['structure'] for r in result['runs']} == set(by_kind)
+    assert result['successes'] >= 19, result['failures']

@@ -63,7 +63,7 @@ class WorldInfo:
     """Where things are. The wall frame W (of the first wall; in a world without one, the
     first target's surface frame): z_W = outward surface normal, y_W = up the wall, x_W =
     right as seen from in front; its origin is the surface point at ground level (the
-    target's centre)."""
+    surface point under the target's centre)."""
 
     R_map_wall: np.ndarray
     wall_origin_map: np.ndarray
@@ -138,8 +138,9 @@ def _wall_frame(structures: list[StructureInstance], objects: list[ObjectInstanc
     if wall is not None:
         return wall.geometry.R, wall.geometry.position
     target = next((o for o in objects if o.target), objects[0] if objects else None)
-    if target is not None:
-        return target.R_map_surface.copy(), target.centre_map.copy()
+    if target is not None:      # the surface under it (its face is a panel proud of it)
+        R = target.R_map_surface
+        return R.copy(), target.centre_map - R[:, 2] * PANEL_THICKNESS_M
     return structures[0].geometry.R, structures[0].geometry.position
 
 

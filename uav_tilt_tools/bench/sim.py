@@ -4,7 +4,9 @@ rtf_physics: the plant core's tick (physics substeps + sensors), no camera, no R
 rtf_camera: the same with the RGB-D camera rendered at its rate (30 Hz).
 rtf_ros_lockstep: plant_node and a hover client in two processes, lockstep, no camera.
 render_ms_p50: one RGB-D frame of the plant's renderer (GL); render_ms_p50_tinyrenderer:
-the same views drawn by TinyRenderer, the two timed in turns in the same run.
+the same views drawn by TinyRenderer, the two timed in turns in the same run;
+render_ms_p50_structures (and _tinyrenderer): the same in the world of structures
+(config/scenarios/structures.yaml: two pipes, a tank, a pillar, an I-beam mesh).
 """
 import json
 import os
@@ -22,10 +24,11 @@ from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import load_scenario
 
 RENDER_ROUNDS = 5
+STRUCTURES = 'config/scenarios/structures.yaml'
 
 
-def _hover_plant() -> tuple[Plant, ActuatorCommand]:
-    scenario = load_scenario()
+def _hover_plant(scenario_file: str | None = None) -> tuple[Plant, ActuatorCommand]:
+    scenario = load_scenario(scenario_file)
     scenario.start_xyz_m = [0.0, 0.0, 1.5]
     plant = Plant(PlantCoreConfig(), scenario)
     hover = np.full(4, plant.mass_kg * 9.80665 / 4)
@@ -49,10 +52,11 @@ def core_rtf(seconds: float, camera: bool) -> float:
     return ticks * plant.dt_tick / wall
 
 
-def render_ms(frames: int) -> tuple[float, float, str]:
+def render_ms(frames: int, scenario_file: str | None = None) -> tuple[float, float, str]:
     """(p50 of the plant's renderer, p50 of TinyRenderer) in ms over ``frames`` views of
-    the vehicle drifting before the wall, the two taking turns in blocks."""
-    plant, command = _hover_plant()
+    the vehicle drifting before the wall (the structures of ``scenario_file``), the two
+    taking turns in blocks."""
+    plant, command = _hover_plant(scenario_file)
     plant.external_force_map = np.array([0.3, 0.2, 0.0])
     tiny = cam_mod.TinyRenderer(plant.config.camera)
     plant.render()          # the renderer's start-up is not a frame
@@ -100,7 +104,9 @@ def bench_sim(seconds: float = 10.0) -> dict[str, Any]:
     physics = core_rtf(seconds, camera=False)
     camera = core_rtf(seconds / 2, camera=True)
     ros = ros_lockstep_rtf(int(seconds * 300))
-    render, tiny, renderer = render_ms(max(int(seconds * 10), RENDER_ROUNDS))
+    frames = max(int(seconds * 10), RENDER_ROUNDS)
+    render, tiny, renderer = render_ms(frames)
+    structures, structures_tiny, _ = render_ms(frames, STRUCTURES)
     return {
         'rtf_physics': round(physics, 2),
         'rtf_camera': round(camera, 2),
@@ -108,6 +114,8 @@ def bench_sim(seconds: float = 10.0) -> dict[str, Any]:
         'ros_lockstep_vs_physics': round(ros / physics, 3),
         'render_ms_p50': round(render, 2),
         'render_ms_p50_tinyrenderer': round(tiny, 2),
+        'render_ms_p50_structures': round(structures, 2),
+        'render_ms_p50_structures_tinyrenderer': round(structures_tiny, 2),
         'renderer': renderer,
         'sim_seconds': seconds,
     }

@@ -28,12 +28,14 @@ def campaign(n: int, seed: int, workers: int | None = None, target_source: str =
              address: str | None = None, out: str | os.PathLike[str] | None = None,
              resume: bool = False, record: bool = False, plan_file: str | None = None,
              scenario_file: str | None = None, corners: bool = False,
-             settings: dict[str, Any] | None = None) -> dict[str, Any]:
+             settings: dict[str, Any] | None = None, structures: bool = False
+             ) -> dict[str, Any]:
     """Run ``n`` randomised missions (of the plan ``plan_file`` on ``scenario_file``'s
     wall when given; ``settings``: the controller's and vehicle's parameters of every run,
     as ``uav-tilt fly --set`` takes them; ``duration_s`` None: the plan's
     (:func:`uav_tilt_tools.runner.fly.default_duration_s`); ``corners``: worlds at the ends
-    of every range, :func:`uav_tilt_sim.randomise.random_draw`); returns the
+    of every range, :func:`uav_tilt_sim.randomise.random_draw`; ``structures``: worlds of
+    structure kinds, :func:`uav_tilt_sim.randomise_structures.structure_draw`); returns the
     DESIGN section 7 JSON dict.
 
     ``backend``: 'local' (a process pool of ``workers``, default one per core) or 'ray'
@@ -49,6 +51,9 @@ def campaign(n: int, seed: int, workers: int | None = None, target_source: str =
         raise ConfigError('recording needs an output folder (--out DIR)')
     if resume and out is None:
         raise ConfigError('resuming needs the campaign\'s output folder (--out DIR)')
+    if structures and (corners or plan_file):
+        raise ConfigError('structure worlds (--structures) are drawn whole: not with '
+                          '--corners or --plan')
     if address is not None and backend != 'ray':
         raise ConfigError('an address (--address) needs the ray backend (--backend ray)')
     cpus = os.cpu_count() or 1
@@ -60,7 +65,7 @@ def campaign(n: int, seed: int, workers: int | None = None, target_source: str =
         workers = workers or min(n, cpus)
         threads = max(1, cpus // max(workers, 1))
     jobs = jobs_of(n, seed, target_source, duration_s, threads, record, plan_file,
-                   scenario_file, corners, settings)
+                   scenario_file, corners, settings, structures)
     store = None
     if out is not None:
         # files as the same path however written ('./a.yaml', 'a.yaml', absolute), and what
@@ -76,6 +81,8 @@ def campaign(n: int, seed: int, workers: int | None = None, target_source: str =
             args['corners'] = True
         if settings:    # the same
             args['settings'] = settings
+        if structures:
+            args['structures'] = True
         store = RunStore(out, args, resume)
     done = store.runs_of(jobs) if store is not None else {}
     todo = [job for job in jobs if job['index'] not in done]
@@ -99,7 +106,8 @@ def campaign(n: int, seed: int, workers: int | None = None, target_source: str =
         results.close()
         if bar is not None:
             bar.close()
-    result = summarize(n, seed, target_source, [done[i] for i in sorted(done)], corners)
+    result = summarize(n, seed, target_source, [done[i] for i in sorted(done)], corners,
+                       structures)
     if store is not None:
         store.finish(result)
     return result

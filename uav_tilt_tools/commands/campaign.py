@@ -64,6 +64,10 @@ def register(sub: 'argparse._SubParsersAction[Any]') -> None:
                              "detector)")
     parser.add_argument('--corners', action='store_true',
                         help='draw every range of the world at one of its ends')
+    parser.add_argument('--structures', action='store_true',
+                        help='draw worlds of structure kinds (wall, corner, pillar, pipe, '
+                             'vertical_pipe, tank, mesh) in place of walls; the JSON gives '
+                             'success by kind')
     parser.add_argument('--set', action='append', metavar='KEY=VALUE',
                         help="as fly's, in every run: a controller parameter or the vehicle's, "
                              "e.g. vehicle.mass_kg=2.0 (not site.*: each run's world has its "
@@ -100,6 +104,7 @@ def _run(args: argparse.Namespace) -> int:
                           backend=args.backend, address=args.address, out=args.out,
                           resume=args.resume, record=args.record, plan_file=args.plan,
                           scenario_file=args.scenario, corners=args.corners, settings=settings,
+                          structures=args.structures,
                           progress=sys.stderr.isatty())    # a bar on a terminal, none in pipes
     except ConfigError as err:
         print(f'uav-tilt campaign: {err}', file=sys.stderr)

@@ -16,15 +16,14 @@ from uav_tilt_common.config import ConfigError
 from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_control.controller_core import plan_of
 from uav_tilt_control.mission import MissionConfig
-from uav_tilt_control.reach import check_reachable
 from uav_tilt_sim.plant import Plant, PlantCoreConfig
 from uav_tilt_sim.scenario import Scenario, check_target, target_ids
 from uav_tilt_tools.bag.flight_bag import FlightBag
 from uav_tilt_tools.bag.folder import recording_folder
-from uav_tilt_tools.metrics.tasks import Truth, failure_of
+from uav_tilt_tools.metrics.tasks import failure_of
 from uav_tilt_tools.runner.inprocess import Progress, run_mission
 from uav_tilt_tools.runner.settings import split_settings
-from uav_tilt_tools.runner.site_params import site_overrides
+from uav_tilt_tools.runner.site_params import check_reach, site_overrides
 
 if TYPE_CHECKING:     # the vision stack (torch) is imported only for a flight with vision
     from uav_tilt_tools.runner.camera_vision import CameraVision
@@ -105,12 +104,9 @@ def check_mission(scenario: Scenario, overrides: dict[str, Any] | None = None,
         check_target(scenario)
     config, vehicle = split_settings(overrides)
     plan = plan_of(config, vehicle)
-    truths = check_world(scenario, vehicle)
-    for task in plan:
-        # the truth of a touch's target: can the tool sit square on it?
-        if task.kind == 'touch' and task.target in truths:
-            check_reachable(f"target {task.target!r}" if task.target else 'the target',
-                            truths[task.target][1][:, 2], config.mission.contact.max_pitch_rad)
+    check_reach(scenario, [task.target for task in plan if task.kind == 'touch'],
+                config.mission.contact.max_pitch_rad)
+    check_world(scenario, vehicle)
     return dict(overrides or {})
 
 
@@ -130,15 +126,11 @@ def check_plan(scenario: Scenario, plan_file: str, overrides: dict[str, Any] | N
     return overrides
 
 
-def check_world(scenario: Scenario, vehicle: VehicleParams | None = None) -> dict[str, Truth]:
+def check_world(scenario: Scenario, vehicle: VehicleParams | None = None) -> None:
     """ConfigError when ``scenario``'s world cannot be flown by ``vehicle`` (default
     VehicleParams()): it is built once, as the plant builds it (a start in the wall is
-    refused there). Returns its targets' truth (:meth:`WorldInfo.truth_targets`)."""
-    plant = Plant(PlantCoreConfig(vehicle=vehicle or VehicleParams()), scenario)
-    try:
-        return plant.world.truth_targets()
-    finally:
-        plant.close()
+    refused there)."""
+    Plant(PlantCoreConfig(vehicle=vehicle or VehicleParams()), scenario).close()
 
 
 def jsonable(value: Any) -> Any:

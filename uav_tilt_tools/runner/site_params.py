@@ -5,14 +5,17 @@ standing on the ground, or none.
 ``python -m uav_tilt_tools.runner.site_params [SCENARIO [MISSION]]`` prints them as ROS
 arguments, one word a line (``-p``, ``site.wall_yaw_deg:=0.0``, ...), for scripts/launch.sh;
 an empty SCENARIO is the default scenario. A bad scenario, or with MISSION ``inspect`` one
-that designates no target, prints one line on stderr and exits 2.
+that designates no target or one the tool cannot sit square on (at the default
+``mission.contact.max_pitch_rad``), prints one line on stderr and exits 2.
 """
 import sys
-from typing import Any, Sequence
+from typing import Any, Iterable, Sequence
 
 from uav_tilt_common.config import ConfigError
+from uav_tilt_control.mission import MissionConfig
+from uav_tilt_control.reach import check_reachable
 from uav_tilt_sim.scenario import (Scenario, check_target, load_scenario, structures_of,
-                                   target_ids)
+                                   target_ids, world_geometry)
 from uav_tilt_sim.structures import WALL
 
 
@@ -35,6 +38,21 @@ def site_overrides(scenario: Scenario, hint_uv_m: Sequence[float] | None = None
     return out
 
 
+def check_reach(scenario: Scenario, touched: Iterable[str], max_pitch_rad: float) -> None:
+    """ConfigError unless the tool can sit square on each target ``touched`` (its id; ''
+    the first target), pitched within ``max_pitch_rad`` (:mod:`uav_tilt_control.reach`)."""
+    _, placed = world_geometry(scenario)
+    targets = [(o.id, p.R_map_surface) for o, (_, p) in zip(scenario.objects, placed)
+               if o.target]
+    frames = dict(targets)
+    if targets:
+        frames[''] = targets[0][1]      # the first target, as ground_truth/target
+    for target_id in touched:
+        if target_id in frames:
+            check_reachable(f"target {target_id!r}" if target_id else 'the target',
+                            frames[target_id][:, 2], max_pitch_rad)
+
+
 def ros_arguments(overrides: dict[str, Any]) -> list[str]:
     """``-p name:=value`` words of parameter overrides (strings quoted, so that an id such
     as ``y`` stays a string; an empty list, which has no type, left out)."""
@@ -54,6 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         scenario = load_scenario(argv[0] if argv and argv[0] else None)
         if argv[1:2] == ['inspect']:    # the one-touch inspection needs its target
             check_target(scenario)
+            check_reach(scenario, [''], MissionConfig().contact.max_pitch_rad)
     except (OSError, ConfigError) as err:
         print(f'site_params: {err}', file=sys.stderr)
         return 2
