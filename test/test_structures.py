@@ -18,6 +18,7 @@ from uav_tilt_sim.camera.renderer import render_with
 from uav_tilt_sim.camera.tiny import TinyRenderer
 from uav_tilt_sim.camera.types import CameraConfig
 from uav_tilt_sim.scenario import Scenario, check_scenario, load_scenario
+from uav_tilt_sim.structure_visuals import box_arrays, cylinder_arrays, mesh_arrays, patch_arrays
 from uav_tilt_sim.visuals import Scene
 from uav_tilt_sim.world import PANEL_THICKNESS_M, build_world
 from uav_tilt_sim.world_json import describe_world
@@ -255,3 +256,23 @@ def test_the_live_view_draws_each_structure_as_built(tmp_path):
     face = wall.position + Rotation.from_quat(wall.quaternion).as_matrix()[:, 2] * 0.1
     assert face[:2] == pytest.approx(cfg['wall'].position_m[:2])
     assert face[2] == pytest.approx(cfg['wall'].height_m / 2)
+
+
+def test_the_drawn_surfaces_face_outwards(tmp_path):
+    """Each triangle of a structure's or a wrapped panel's mesh turns counter-clockwise
+    seen from outside (as every visual does), its shading normals on the same side."""
+    rng = np.random.default_rng(np.random.SeedSequence().entropy)
+    beam = i_beam(tmp_path / 'beam.obj')
+    meshes = [box_arrays(rng.uniform(0.1, 3.0, 3), 0.5, 2.0),
+              cylinder_arrays(rng.uniform(0.05, 3.0), rng.uniform(0.1, 5.0), 0.5, 2.0),
+              patch_arrays(0.1, rng.uniform(0.07, 3.0), 0.01,
+                           np.array([math.cos(a := rng.uniform(0, math.pi)), math.sin(a)])),
+              mesh_arrays(np.asarray(beam.vertices), np.asarray(beam.faces), 0.5, 2.0)]
+    for vertices, normals, _, triangles in meshes:
+        triangles = np.asarray(triangles, dtype=int)
+        corners = vertices[triangles]
+        winding = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        area = np.linalg.norm(winding, axis=1)
+        shading = normals[triangles].mean(axis=1)
+        kept = area > 1e-12                  # a polar grid's triangles at its centre vanish
+        assert np.all(np.einsum('ij,ij->i', winding[kept], shading[kept]) > 0)

@@ -52,7 +52,8 @@ def cylinder_arrays(radius_m: float, length_m: float, tile_m: float, texture_m: 
                              np.full(rr.size, sign * length_m / 2)])
         k = (np.arange(n_round)[:, None] * (n_rings + 1) + np.arange(n_rings)[None, :]).ravel()
         quads = np.column_stack([k, k + n_rings + 1, k + n_rings + 2, k + 1])
-        order = [0, 1, 2, 0, 2, 3] if sign > 0 else [0, 2, 1, 0, 3, 2]
+        # counter-clockwise seen from outside (+z for the top)
+        order = [0, 2, 1, 0, 3, 2] if sign > 0 else [0, 1, 2, 0, 2, 3]
         tri = quads[:, order].reshape(-1, 3)
         parts.append((v, np.tile([0.0, 0.0, sign], (len(v), 1)), v[:, :2] / texture_m, tri))
     return concat(parts)
