@@ -4,7 +4,7 @@ the image), the texture repeated every ``texture_m``."""
 import numpy as np
 import trimesh
 
-from uav_tilt_sim.visuals import Mesh, concat, quad_grid
+from uav_tilt_sim.visuals import Mesh, box_faces, concat, quad_grid
 
 ROUND_SEGMENTS_MIN = 24
 PATCH_SEGMENTS = 8
@@ -13,19 +13,8 @@ PATCH_SEGMENTS = 8
 def box_arrays(size_m: np.ndarray, tile_m: float, texture_m: float) -> Mesh:
     """A box of sides ``size_m`` whose frame is the middle of its base."""
     half = np.asarray(size_m, dtype=float) / 2
-    parts = []
-    for axis in range(3):
-        for sign in (1.0, -1.0):
-            normal = np.zeros(3)
-            normal[axis] = sign
-            a, b = (axis + 1) % 3, (axis + 2) % 3
-            x_dir, y_dir = np.eye(3)[a], np.eye(3)[b] * sign
-            R = np.column_stack([x_dir, y_dir, np.cross(x_dir, y_dir)])
-            v, uv, tri = quad_grid(half[a], half[b], tile_m)
-            v = v @ R.T + normal * half + [0.0, 0.0, half[2]]
-            uv = uv * 2 * np.array([half[a], half[b]]) / texture_m
-            parts.append((v, np.tile(normal, (len(v), 1)), uv, tri))
-    return concat(parts)
+    v, n, uv, tri = box_faces(half, tile_m, texture_m)
+    return v + [0.0, 0.0, half[2]], n, uv, tri
 
 
 def cylinder_arrays(radius_m: float, length_m: float, tile_m: float, texture_m: float

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uav_tilt_common.config import ConfigError, param
-from uav_tilt_common.geometry import cross3, wall_rotation
+from uav_tilt_common.geometry import cross3, euler_zyx_to_matrix, wall_rotation
 from uav_tilt_sim.structure_mesh import MeshShape, load_mesh
 
 WALL, BOX, CYLINDER, MESH = 'wall', 'box', 'cylinder', 'mesh'
@@ -62,12 +62,6 @@ class StructureConfig:
                             doc='Coulomb friction coefficient of it and its objects')
 
 
-def yaw_matrix(yaw_deg: float) -> Array:
-    """Rz(yaw)."""
-    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def cylinder_rotation(yaw_deg: float, elevation_deg: float) -> Array:
     """Columns (c1, c2, axis): the axis at heading yaw, elevation above horizontal; c1 the
     horizontal side (heading yaw + 90 deg), c2 = axis x c1 (up for a horizontal axis). An
@@ -114,7 +108,7 @@ class Structure:
         elif cfg.kind == CYLINDER:
             self.R = cylinder_rotation(cfg.yaw_deg, cfg.elevation_deg)
         else:
-            self.R = yaw_matrix(cfg.yaw_deg)
+            self.R = euler_zyx_to_matrix(math.radians(cfg.yaw_deg), 0.0, 0.0)
 
     def local(self, points_map: Array) -> Array:
         """Points (N x 3) in the structure's frame (origin ``position_m``)."""

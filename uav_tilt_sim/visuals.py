@@ -88,18 +88,26 @@ def _quad_mesh(visual: Visual) -> Mesh:
 
 
 def _box_mesh(visual: Visual) -> Mesh:
-    half = np.asarray(visual.size, dtype=float)
+    return box_faces(np.asarray(visual.size, dtype=float))
+
+
+def box_faces(half: np.ndarray, tile_m: float | None = None,
+              texture_m: float | None = None) -> Mesh:
+    """A box of half extents ``half`` about its centre, each face a quad (split into tiles
+    of about ``tile_m``) turned so that its +z is the face's outward normal, its texture
+    once over it or repeated every ``texture_m``."""
     parts = []
     for axis in range(3):
         for sign in (1.0, -1.0):
-            # A unit quad turned so that its +z is this face's outward normal.
             normal = np.zeros(3)
             normal[axis] = sign
             a, b = (axis + 1) % 3, (axis + 2) % 3
             x_dir, y_dir = np.eye(3)[a], np.eye(3)[b] * sign
             R = np.column_stack([x_dir, y_dir, np.cross(x_dir, y_dir)])
-            v, uv, tri = quad_grid(1.0, 1.0, None)
-            parts.append(((v @ R.T + normal) * half, np.tile(normal, (4, 1)), uv, tri))
+            v, uv, tri = quad_grid(half[a], half[b], tile_m)
+            if texture_m:
+                uv = uv * 2 * np.array([half[a], half[b]]) / texture_m
+            parts.append((v @ R.T + normal * half, np.tile(normal, (len(v), 1)), uv, tri))
     return concat(parts)
 
 

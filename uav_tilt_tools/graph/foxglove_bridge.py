@@ -130,12 +130,10 @@ def structure_shapes(scenario: Scenario) -> list[Shape]:
         q = Rotation.from_matrix(g.R).as_quat()
         entity_id = 'wall' if not scenario.structures else f'structure:{cfg.id}'
         if cfg.kind == WALL:
-            centre = g.position + g.R[:, 1] * cfg.height_m / 2 - g.R[:, 2] * WALL_THICKNESS_M / 2
-            shapes.append(Shape(entity_id, 'cube', centre, q,
+            shapes.append(Shape(entity_id, 'cube', g.centre_map(), q,
                                 (cfg.width_m, cfg.height_m, WALL_THICKNESS_M)))
         elif cfg.kind == BOX:
-            shapes.append(Shape(entity_id, 'cube', g.position + g.R[:, 2] * cfg.size_m[2] / 2,
-                                q, tuple(cfg.size_m)))
+            shapes.append(Shape(entity_id, 'cube', g.centre_map(), q, tuple(cfg.size_m)))
         elif cfg.kind == CYLINDER:
             d = 2 * cfg.radius_m
             shapes.append(Shape(entity_id, 'cylinder', g.position, q, (d, d, cfg.length_m)))
