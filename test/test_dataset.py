@@ -54,9 +54,10 @@ def test_splits_are_disjoint():
         assert a[1] <= b[0] or b[1] <= a[0], field
 
 
-@pytest.fixture(scope='module')
-def views():
-    """(info, seg, eye, R_cam) of 24 training-split views: 4 in each of 6 worlds."""
+@pytest.fixture(scope='module', params=dataset.SCENES)
+def views(request):
+    """(info, seg, eye, R_cam) of 24 training-split views: 4 in each of 6 worlds of a wall
+    or of structures."""
     cam = CameraConfig()
     renderer = make_renderer(cam)
     client = p.connect(p.DIRECT)
@@ -65,7 +66,8 @@ def views():
     try:
         for world in range(6):
             rng = np.random.default_rng([11, world])
-            info = dataset.build_random_world(scene, rng, dataset.SPLITS['train'])
+            info = dataset.build_random_world(scene, rng, dataset.SPLITS['train'],
+                                              request.param)
             for _ in range(4):
                 eye, R_cam = dataset.camera_pose(rng, info, cam)
                 _, _, seg = renderer.render(scene, eye, R_cam, Lighting(), segmentation=True)
@@ -79,9 +81,11 @@ def views():
 
 
 def test_boxes_match_the_projected_object_faces(views):
-    """Unoccluded objects fully in view: box == bounds of the projected face corners."""
+    """Unoccluded flat objects fully in view: box == bounds of the projected face corners."""
     cam = CameraConfig()
     checked = 0
+    if any(s.kind != 'wall' for info, *_ in views for s in info.structures):
+        pytest.skip('an object on a pipe follows its curve: its corners do not bound it')
     for info, seg, eye, R_cam in views:
         rows, _ = dataset.labels_from_segmentation(seg, info, eye, R_cam, cam)
         for obj in info.objects:
@@ -118,7 +122,7 @@ def test_every_object_in_view_is_labelled_or_an_ignore_region(views):
             ys, xs = np.nonzero(seg == obj.body)
             if len(xs) == 0:
                 continue
-            full = dataset.projected_area(obj.centre_map, info.R_map_wall, eye, R_cam, cam)
+            full = dataset.projected_area(obj.centre_map, obj.R_map_surface, eye, R_cam, cam)
             visible = len(xs) >= max(dataset.MIN_VISIBLE_PX,
                                      dataset.MIN_VISIBLE_FRACTION * full)
             # pixel bounds, centre and size normalised like a YOLO row
@@ -132,6 +136,20 @@ def test_every_object_in_view_is_labelled_or_an_ignore_region(views):
                                    np.reshape(expected[False], (-1, 5)))
         n_ignored += len(ignore)
     assert n_ignored >= 1, 'no view has a partly visible object; the test checks nothing'
+
+
+def test_structure_scenes_put_objects_on_the_campaign_s_structures(views):
+    """Structure worlds are of the campaign's kinds other than a wall, every object on one
+    of them, and most views label an object."""
+    if all(s.kind == 'wall' for info, *_ in views for s in info.structures):
+        pytest.skip('a wall scene')
+    cam, kinds, labelled = CameraConfig(), set(), 0
+    for info, seg, eye, R_cam in views:
+        ids = {s.id for s in info.structures}
+        assert info.objects and all(o.on in ids for o in info.objects)
+        kinds.add(tuple(sorted(s.id for s in info.structures)))
+        labelled += bool(dataset.labels_from_segmentation(seg, info, eye, R_cam, cam)[0])
+    assert len(kinds) >= 3 and labelled >= len(views) // 2, (kinds, labelled)
 
 
 def test_photometric_keeps_shape_and_changes_pixels():

@@ -56,9 +56,9 @@ def _checkpoint(path: str, option: str) -> tuple[Path, Any]:
 def _dataset(a: argparse.Namespace) -> dict[str, Any]:
     from uav_tilt_vision.training.dataset import DISTANCE_M, generate
     meta = generate(a.out, a.n, a.seed, a.split, a.jobs, renderer=a.renderer,
-                    distance_m=a.distance_m or DISTANCE_M)
+                    distance_m=a.distance_m or DISTANCE_M, scenes=a.scenes)
     return {k: meta[k] for k in ('seed', 'split', 'n', 'classes', 'boxes_per_class',
-                                 'renderer', 'distance_m')}
+                                 'renderer', 'distance_m', 'scenes')}
 
 
 def _train(a: argparse.Namespace) -> dict[str, Any]:
@@ -157,6 +157,9 @@ def parser() -> argparse.ArgumentParser:
     d.add_argument('--distance-m', type=cli_args.positive, nargs=2, metavar=('MIN', 'MAX'),
                    help='camera distance range, log-uniform, up to the camera\'s far clip '
                         'plane (default dataset.DISTANCE_M: the mission\'s ranges)')
+    d.add_argument('--scenes', choices=('wall', 'structures'), default='wall',
+                   help='worlds of a wall, or of the campaign\'s structures (a corner, a '
+                        'pillar, pipes, a tank, a mesh) with objects on them')
     d.set_defaults(run=_dataset)
     t = command('train', help='train the fp32 detector; writes weights + model card')
     t.add_argument('--data', required=True, help='training set (a `dataset` folder)')

@@ -13,6 +13,12 @@ truncation are exact. An object in view but less visible than the labelling rule
 ``labels/``: a region where a detection is neither right nor wrong (COCO's crowd regions,
 KITTI's "don't care").
 
+With ``scenes='structures'`` each world is instead one of the campaign's structure kinds
+other than a wall (``uav_tilt_sim.randomise_structures``: a corner, a pillar, pipes, a tank,
+a mesh), its target and up to three more objects of random classes on the same surface, and
+the camera looks along each object's own surface normal: a scene set to score the detector
+on curved and cornered surfaces against the flat wall.
+
 Splits (``SPLITS``): ``train`` and ``heldout`` draw from disjoint RNG streams (object,
 wall and ground textures never repeat), disjoint wall texture families and disjoint
 lighting ranges; ``meta.json`` records them. Output is YOLO text format (``yolo_data``).
@@ -38,16 +44,17 @@ from uav_tilt_common.vehicle import VehicleParams
 from uav_tilt_sim import textures
 from uav_tilt_sim.bullet import pybullet as p
 from uav_tilt_sim.camera import CameraConfig, Lighting, Renderer, make_renderer
-from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig
+from uav_tilt_sim.randomise_structures import STRUCTURE_KINDS, structure_draw
+from uav_tilt_sim.scenario import ObjectConfig, Scenario, WallConfig, check_scenario
 from uav_tilt_sim.vehicle_body import create_vehicle
 from uav_tilt_sim.visuals import BOX, Scene, Visual, apply_texture, create_static_body
 from uav_tilt_sim.world import WorldInfo, build_world
 
 T = TypeVar('T')
 R_ = TypeVar('R_')
-# one world's job for render_world:
-# (out, seed, split, world, image indices, renderer, (min, max) camera distance in m)
-Job = tuple[str, int, str, int, range, str, tuple[float, float]]
+# one world's job for render_world: (out, seed, split, world, image indices, renderer,
+# (min, max) camera distance in m, scenes)
+Job = tuple[str, int, str, int, range, str, tuple[float, float], str]
 # YOLO rows [class, cx, cy, w, h] (normalised)
 LabelRows = list[list[float]]
 
@@ -62,6 +69,12 @@ DISTANCE_M = (0.4, 5.0)   # the mission's ranges: a 0.2 m plate spans 11-140 px
 PATCH_UV_M = ((-2.0, 0.3), (2.0, 3.1))   # where objects and panels go on the wall (u, v)
 OCCLUDER_PROB = 0.3
 VEHICLE_PROB = 0.5
+SCENES = ('wall', 'structures')
+STRUCTURE_SCENE_KINDS = tuple(k for k in STRUCTURE_KINDS
+                              if k not in ('wall', 'pillar_between'))
+# the more objects of a structure scene: the target's place moved along the surface by
+# this many metres (up the wall or face, along the pipe's axis, up the mesh)
+EXTRA_OBJECT_SHIFTS_M = (-0.7, -0.35, 0.35, 0.7)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,8 +119,43 @@ def _box_body(scene: Scene, centre: np.ndarray, R: np.ndarray, half_extents: Seq
                               Rotation.from_matrix(R).as_quat())
 
 
-def build_random_world(scene: Scene, rng: np.random.Generator, spec: SplitSpec) -> WorldInfo:
-    """Build a random world whose wall texture is of one of ``spec``'s families."""
+def random_structure_scenario(rng: np.random.Generator) -> Scenario:
+    """A campaign's structure world of a kind other than a wall, its target of a random
+    class and up to three more objects on the same surface (where they fit on it)."""
+    kind = STRUCTURE_SCENE_KINDS[int(rng.integers(len(STRUCTURE_SCENE_KINDS)))]
+    scenario, _, _ = structure_draw(int(rng.integers(2**31)), kind)
+    first = scenario.objects[0]
+    cls = CLASSES[int(rng.integers(len(CLASSES)))]
+    objects = [dataclasses.replace(first, cls=cls, target=cls in textures.POI_UV)]
+    shifts = rng.permutation(EXTRA_OBJECT_SHIFTS_M)[:int(rng.integers(0, 4))]
+    for shift in shifts:
+        moved = dataclasses.replace(first, target=False, id='',
+                                    cls=CLASSES[int(rng.integers(len(CLASSES)))],
+                                    **_shifted_place(scenario, first, float(shift)))
+        try:
+            check_scenario(dataclasses.replace(scenario, objects=[*objects, moved]))
+        except ConfigError:     # off its surface, or on another object
+            continue
+        objects.append(moved)
+    return dataclasses.replace(scenario, objects=objects)
+
+
+def _shifted_place(scenario: Scenario, obj: ObjectConfig, shift_m: float) -> dict[str, Any]:
+    """``obj``'s surface coordinates moved by ``shift_m`` along its structure's surface."""
+    kind = next(s.kind for s in scenario.structures if s.id == obj.on)
+    if kind == 'mesh':
+        return {'point_m': [obj.point_m[0], obj.point_m[1], obj.point_m[2] + shift_m]}
+    if kind == 'cylinder':
+        return {'axial_m': obj.axial_m + shift_m}
+    return {'v_m': obj.v_m + shift_m}
+
+
+def build_random_world(scene: Scene, rng: np.random.Generator, spec: SplitSpec,
+                       scenes: str = 'wall') -> WorldInfo:
+    """Build a random world (``scenes``: a wall, or a structure) whose surfaces' textures
+    are of one of ``spec``'s families."""
+    if scenes == 'structures':
+        return _build_structure_world(scene, rng, spec)
     scenario = random_scenario(rng)
     client = scene.client
     info = build_world(client, scenario, texture_rng=rng, scene=scene)
@@ -125,17 +173,30 @@ def build_random_world(scene: Scene, rng: np.random.Generator, spec: SplitSpec) 
     return info
 
 
+def _build_structure_world(scene: Scene, rng: np.random.Generator, spec: SplitSpec
+                           ) -> WorldInfo:
+    info = build_world(scene.client, random_structure_scenario(rng), texture_rng=rng,
+                       scene=scene)
+    for s in info.structures:
+        family = spec.wall_families[int(rng.integers(len(spec.wall_families)))]
+        face = dataclasses.replace(s.visual, texture=textures.wall_texture(rng, family=family))
+        apply_texture(scene.client, s.body, face)
+        scene.add(s.body, -1, [face], static=True)
+    return info
+
+
 def camera_pose(rng: np.random.Generator, info: WorldInfo, cam: CameraConfig,
                 distance_m: Sequence[float] = DISTANCE_M) -> tuple[np.ndarray, np.ndarray]:
-    """Random (eye, R_map_cam) looking at the wall from ``distance_m`` (log-uniform) of a
-    point on it, up to 45 deg off-normal.
+    """Random (eye, R_map_cam) looking at the surface of a random object from
+    ``distance_m`` (log-uniform) of a point on its tangent plane, up to 45 deg off its
+    normal.
 
     The aim point is offset from an object by up to the half field of view, so objects
     land anywhere in the image, including cut by its border.
     """
-    R = info.R_map_wall
     dist = float(np.exp(rng.uniform(*np.log(distance_m))))
     obj = info.objects[int(rng.integers(len(info.objects)))]
+    R = obj.R_map_surface
     half_fov = dist * np.array([cam.width / cam.fx, cam.height / cam.fy]) / 2
     aim = obj.centre_map + R[:, :2] @ (rng.uniform(-1, 1, 2) * half_fov)
     tilt = np.radians(MAX_VIEW_ANGLE_DEG) * np.sqrt(rng.random())  # uniform over the cone
@@ -205,11 +266,11 @@ def photometric(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
-def projected_area(centre_map: np.ndarray, R_map_wall: np.ndarray, eye: np.ndarray,
+def projected_area(centre_map: np.ndarray, R_map_surface: np.ndarray, eye: np.ndarray,
                    R_map_cam: np.ndarray, cam: CameraConfig) -> float:
     """Image area (px^2) of an object's whole front face; inf when it reaches behind the eye."""
     half = textures.OBJECT_SIZE_M / 2
-    corners = [centre_map + R_map_wall @ [su * half, sv * half, 0.0]
+    corners = [centre_map + R_map_surface @ [su * half, sv * half, 0.0]
                for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
     pc = np.array([R_map_cam.T @ (c - eye) for c in corners])
     if np.any(pc[:, 2] < cam.near_m):
@@ -229,7 +290,7 @@ def labels_from_segmentation(seg: np.ndarray, info: WorldInfo, eye: np.ndarray,
         ys, xs = np.nonzero(seg == obj.body)
         if len(xs) == 0:
             continue
-        full = projected_area(obj.centre_map, info.R_map_wall, eye, R_map_cam, cam)
+        full = projected_area(obj.centre_map, obj.R_map_surface, eye, R_map_cam, cam)
         x1, x2, y1, y2 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
         row = [CLASSES.index(obj.cls), (x1 + x2) / 2 / cam.width,
                (y1 + y2) / 2 / cam.height, (x2 - x1) / cam.width, (y2 - y1) / cam.height]
@@ -246,13 +307,13 @@ def _renderer(renderer: str) -> Renderer:
 
 def render_world(job: Job) -> list[int]:
     """Render and write the images of one world; returns the class ids it labelled."""
-    out, seed, split, world, indices, renderer, distance_m = job
+    out, seed, split, world, indices, renderer, distance_m, scenes = job
     spec, cam = SPLITS[split], CameraConfig()
     rng = np.random.default_rng([seed, spec.stream, world])
     client = p.connect(p.DIRECT)
     scene = Scene(client)
     try:
-        info = build_random_world(scene, rng, spec)
+        info = build_random_world(scene, rng, spec, scenes)
         classes: list[int] = []
         for k in indices:
             eye, R_cam = camera_pose(rng, info, cam, distance_m)
@@ -295,16 +356,18 @@ def check_distance(distance_m: Sequence[float]) -> tuple[float, float]:
 
 def generate(out: str | os.PathLike[str], n: int, seed: int = 0, split: str = 'train',
              jobs: int = 1, show_progress: bool = True, renderer: str = 'gl',
-             distance_m: Sequence[float] = DISTANCE_M) -> dict[str, Any]:
+             distance_m: Sequence[float] = DISTANCE_M, scenes: str = 'wall') -> dict[str, Any]:
     """Write ``n`` labelled images and ``meta.json`` to ``out``; returns the meta dict.
 
     ``renderer``: the camera's renderer (``gl`` or ``tiny``, see ``uav_tilt_sim.camera``);
     train on images of the renderer the plant uses. ``distance_m``: (min, max) distance of
     the camera from the point it looks at (sets rendered before the mission's ranges grew
-    to 5 m used (0.4, 4.0)).
+    to 5 m used (0.4, 4.0)). ``scenes``: ``wall`` or ``structures`` (the module's text).
     """
     if split not in SPLITS:
         raise ValueError(f'unknown split {split!r}; expected one of {tuple(SPLITS)}')
+    if scenes not in SCENES:
+        raise ValueError(f'unknown scenes {scenes!r}; expected one of {SCENES}')
     lo, hi = check_distance(distance_m)
     out = Path(out)
     for folder in ('images', 'labels', 'ignore'):
@@ -315,7 +378,7 @@ def generate(out: str | os.PathLike[str], n: int, seed: int = 0, split: str = 't
         (out / folder).mkdir(parents=True, exist_ok=True)
     worlds = [(str(out), seed, split, w, range(w * IMAGES_PER_WORLD,
                                                min((w + 1) * IMAGES_PER_WORLD, n)), renderer,
-               (lo, hi))
+               (lo, hi), scenes)
               for w in range(-(-n // IMAGES_PER_WORLD))]
     bar = tqdm(total=n, desc=f'dataset {split}', unit='img', disable=not show_progress)
     counts = np.zeros(len(CLASSES), int)
@@ -330,7 +393,7 @@ def generate(out: str | os.PathLike[str], n: int, seed: int = 0, split: str = 't
             'heldout_policy': 'train and heldout use disjoint RNG streams (all textures), '
                               'disjoint wall families and disjoint lighting ranges',
             'camera': dataclasses.asdict(CameraConfig(renderer=renderer)),
-            'renderer': _renderer(renderer).name, 'distance_m': [lo, hi],
+            'renderer': _renderer(renderer).name, 'distance_m': [lo, hi], 'scenes': scenes,
             'max_view_angle_deg': MAX_VIEW_ANGLE_DEG, 'occluder_prob': OCCLUDER_PROB,
             'vehicle_prob': VEHICLE_PROB,
             'min_visible_px': MIN_VISIBLE_PX, 'min_visible_fraction': MIN_VISIBLE_FRACTION}
