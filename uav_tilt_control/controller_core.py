@@ -106,7 +106,7 @@ class ControllerCore:
         self.estimator.hint_map = cfg.site.target_hint_map()
         self.mission = Mission(vehicle, cfg.mission, cfg.contact_force,
                                drop_target=self.estimator.reset, plan=plan_of(cfg, vehicle),
-                               on_task=self._on_task)
+                               on_task=self._on_task, obstacles=cfg.site.obstacles())
         self._odom: VehicleState | None = None
         self._R_map_base: np.ndarray | None = None  # of the odometry, on first use
         self._q_blind: np.ndarray | None = None

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 from uav_tilt_common.config import ConfigError, param
 from uav_tilt_common.geometry import wall_point, wall_rotation
 from uav_tilt_common.targets import HINT_ERROR_M
+from uav_tilt_control.obstacles import BOX_FIELDS, ObstacleBox, boxes_from_flat
 
 
 @dataclasses.dataclass
@@ -17,8 +18,9 @@ class SiteConfig:
     """The wall (the scenario's convention: its ground line through ``wall_position_m``,
     ``wall_yaw_deg`` the heading towards it, ``wall_inclination_deg`` its top leaning away,
     ``wall_width_m`` across u = 0, ``wall_height_m`` from the ground; 0 = not surveyed),
-    the ids of the targets a plan may name and, optionally, roughly where the target of a
-    one-touch inspection is on the wall (u, v metres; within HINT_ERROR_M along each)."""
+    the ids of the targets a plan may name, optionally roughly where the target of a
+    one-touch inspection is on the wall (u, v metres; within HINT_ERROR_M along each), and
+    the structures the approach keeps clear of, as upright boxes."""
 
     wall_position_m: list = param([], lo=-1000.0, hi=1000.0, items=float)
     wall_yaw_deg: float = param(0.0, lo=-180.0, hi=180.0)
@@ -27,6 +29,11 @@ class SiteConfig:
     wall_height_m: float = param(0.0, lo=0.0, hi=1000.0)
     target_hint_uv_m: list = param([], lo=-1000.0, hi=1000.0, items=float)
     target_ids: list = param([], items=str)
+    obstacle_boxes: list = param(
+        [], lo=-1000.0, hi=1000.0, items=float,
+        doc=f'the structures to keep clear of, as upright boxes in map of '
+            f'{len(BOX_FIELDS)} numbers each: centre x, y, z and sizes along the box\'s own '
+            f'x, y, z (m), then its yaw (deg); the approach to a target goes round them')
 
     def check(self) -> 'SiteConfig':
         """Cross-field checks (ConfigError); returns the site."""
@@ -44,7 +51,15 @@ class SiteConfig:
                               f"{self.wall_width_m}, site.wall_height_m {self.wall_height_m})")
         if len(set(self.target_ids)) != len(self.target_ids):
             raise ConfigError(f"parameter 'site.target_ids' = {self.target_ids!r} repeats an id")
+        self.obstacles()
         return self
+
+    def obstacles(self) -> list[ObstacleBox]:
+        """The boxes of ``obstacle_boxes`` (ConfigError for a bad list)."""
+        try:
+            return boxes_from_flat(self.obstacle_boxes)
+        except ValueError as err:
+            raise ConfigError(f"parameter 'site.obstacle_boxes': {err}") from None
 
     @property
     def wall_known(self) -> bool:

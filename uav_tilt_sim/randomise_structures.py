@@ -2,7 +2,10 @@
 STRUCTURE_KINDS, in any direction from the start, under the wind, sensor noise, model
 mismatch, stiffness and friction of :func:`uav_tilt_sim.randomise.random_draw`'s draw of the
 same seed (a ``wall`` is that draw itself). The target is on the side the vehicle reaches
-flying straight to it: facing the start, within the tool's reach of horizontal.
+flying straight to it: facing the start, within the tool's reach of horizontal; but a
+``pillar``'s target is on a face turned away from the start, and in a ``pillar_between``
+world a pillar stands in the straight flight's way, not in the camera's: the search and the
+approach go round them.
 """
 import dataclasses
 import math
@@ -15,7 +18,8 @@ from uav_tilt_common.config import from_dict
 from uav_tilt_sim.randomise import START_YAW_DEG, random_draw
 from uav_tilt_sim.scenario import Scenario, check_scenario
 
-STRUCTURE_KINDS = ('wall', 'corner', 'pillar', 'pipe', 'vertical_pipe', 'tank', 'mesh')
+STRUCTURE_KINDS = ('wall', 'corner', 'pillar', 'pipe', 'vertical_pipe', 'tank', 'mesh',
+                   'pillar_between')
 MESH_FILE = 'config/meshes/i_beam.obj'       # an I-beam 3 m tall, its flange 0.4 m wide
 DISTANCE_M = (2.5, 4.0)             # start to the surface in front of it
 TARGET_HEIGHT_M = (1.3, 2.0)
@@ -24,6 +28,14 @@ TANK_RADIUS_M = (1.0, 3.0)
 PIPE_SIDE_DEG = 30.0                # a horizontal pipe's target, off its side
 OFF_FACING_DEG = 20.0               # a round target's normal, off the line to the start
 CORNER_EDGE_M = (0.25, 0.4)         # a corner's target from the edge
+# a pillar's target is on a face turned away from the start (its -x face looks at it): the
+# search goes round the pillar to see it, the approach round it to reach it
+PILLAR_FACES = ('+y', '-y', '+x')
+BETWEEN_WALL_M = (4.0, 5.5)         # pillar_between: start to the wall
+BETWEEN_AT = (0.4, 0.6)             # the pillar's share of the way there
+# the pillar's near edge off the line of sight: the camera sees past it, and the vehicle
+# flying straight would strike it (its arms reach 0.16 m to each side, their blades more)
+BETWEEN_GAP_M = (0.05, 0.15)
 
 
 def structure_draw(seed: int, kind: str | None = None
@@ -80,11 +92,20 @@ def _local_world(kind: str, rng: np.random.Generator
                  dict(id='b', kind='wall', position_m=[d - 1.5, edge_y, 0.0], yaw_deg=-90.0,
                       width_m=3.0)],
                 [dict(on='a', u_m=-(edge_y + u(*CORNER_EDGE_M)), v_m=height, **target)])
+    if kind == 'pillar_between':
+        d, u_t, side, at = u(*BETWEEN_WALL_M), u(-0.2, 0.2), u(0.4, 0.6), u(*BETWEEN_AT)
+        # the wall faces the start (u right = -y); the line of sight passes y = -u_t at
+        y = -u_t * at + float(rng.choice([-1.0, 1.0])) * (side / 2 + u(*BETWEEN_GAP_M))
+        return ([dict(id='wall', kind='wall', position_m=[d, 0.0, 0.0], width_m=5.0),
+                 dict(id='pillar', kind='box', position_m=[d * at, y, 0.0],
+                      size_m=[side, side, 3.0])],
+                [dict(on='wall', u_m=u_t, v_m=height, **target)])
     if kind == 'pillar':
         side = u(0.4, 0.8)
         return ([dict(id='pillar', kind='box', position_m=[d + side / 2, 0.0, 0.0],
                       yaw_deg=u(-OFF_FACING_DEG, OFF_FACING_DEG), size_m=[side, side, 3.0])],
-                [dict(on='pillar', face='-x', u_m=u(-0.1, 0.1) * side, v_m=height, **target)])
+                [dict(on='pillar', face=str(rng.choice(PILLAR_FACES)), u_m=u(-0.1, 0.1) * side,
+                      v_m=height, **target)])
     assert kind == 'mesh', kind
     # the beam's flange (normal +y in its file, 0.25 m off its axis) turned to the start
     return ([dict(id='beam', kind='mesh', file=str(resources.resolve(MESH_FILE, 'file')),

@@ -145,6 +145,41 @@ class Structure:
             middle = (self.mesh.vertices.min(axis=0) + self.mesh.vertices.max(axis=0)) / 2
         return self.position + self.R @ middle
 
+    def hull_points_map(self) -> Array:
+        """Points (N x 3, map) whose convex hull holds the structure: a box's or a wall's
+        corners, a cylinder's two rims (a 64-gon drawn round each rim), a mesh's vertices."""
+        c = self.cfg
+        if c.kind in (WALL, BOX):
+            if c.kind == WALL:
+                lo = np.array([-c.width_m / 2, 0.0, -WALL_THICKNESS_M])
+                hi = np.array([c.width_m / 2, c.height_m, 0.0])
+            else:
+                lo = np.array([-c.size_m[0] / 2, -c.size_m[1] / 2, 0.0])
+                hi = np.array([c.size_m[0] / 2, c.size_m[1] / 2, c.size_m[2]])
+            local = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                              for z in (lo[2], hi[2])])
+        elif c.kind == CYLINDER:
+            a = np.linspace(0.0, 2.0 * math.pi, 64, endpoint=False)
+            # the polygon's sides lie inside the circle: reach it with their middles
+            r = c.radius_m / math.cos(math.pi / 64)
+            rim = np.column_stack([r * np.cos(a), r * np.sin(a)])
+            local = np.vstack([np.column_stack([rim, np.full(64, z)])
+                               for z in (-c.length_m / 2, c.length_m / 2)])
+        else:
+            assert self.mesh is not None
+            local = self.mesh.vertices
+        return self.position + local @ self.R.T
+
+    def plan_box(self) -> tuple[Array, Array, float]:
+        """(centre, sizes, yaw_deg) of an upright box turned by the structure's yaw that
+        holds it: an obstacle as a site lists it (uav_tilt_control.obstacles)."""
+        points = self.hull_points_map()
+        yaw = math.radians(self.cfg.yaw_deg)
+        R = euler_zyx_to_matrix(yaw, 0.0, 0.0)
+        local = points @ R
+        lo, hi = local.min(axis=0), local.max(axis=0)
+        return R @ ((lo + hi) / 2.0), hi - lo, float(self.cfg.yaw_deg)
+
     def place(self, face: str, u_m: float, v_m: float, axial_m: float, angle_deg: float,
               point_m: list[float], size_m: float, name: str) -> Placement:
         """Where an object ``size_m`` square sits on this structure, from the surface

@@ -2,6 +2,7 @@
 transitions a mode's tick returns, the mode interface, and helpers used by several modes."""
 import collections
 import dataclasses
+import math
 import typing
 
 import numpy as np
@@ -14,6 +15,7 @@ from uav_tilt_control.mission.config import MissionConfig
 from uav_tilt_control.mission.detectors import BumpDetector, Geofence
 from uav_tilt_control.mission.records import TaskRecords
 from uav_tilt_control.mission.reference import Reference, SetpointSample
+from uav_tilt_control.obstacles import ObstacleBox, route
 from uav_tilt_control.plan import Task
 from uav_tilt_control.target_estimator import TargetEstimate
 
@@ -107,6 +109,7 @@ class Context:
         self.contact_lost = 0
         self.events: collections.deque[dict[str, typing.Any]] = collections.deque(maxlen=200)
         self.event = event
+        self.obstacles: list[ObstacleBox] = []     # the site's (set by the executor)
 
     @property
     def now_s(self) -> float:
@@ -151,6 +154,19 @@ class Context:
         self.ref.yaw_goal = self.ref.yaw_ref
         self.event(f'touched something ({np.linalg.norm(self.bump_detector.f_contact_map):.1f}'
                    f' N): backing off')
+
+    @property
+    def keep_off_m(self) -> float:
+        """How far the body keeps off an obstacle: the vehicle's reach (its tool tip ahead,
+        its rotors round it) and flight.obstacle_clearance_m."""
+        v = self.vehicle
+        return (max(v.tool_tip_x_m, math.hypot(v.l1_m, v.l2_m))
+                + self.config.flight.obstacle_clearance_m)
+
+    def route(self, start_map: np.ndarray, goal_map: np.ndarray) -> list[np.ndarray] | None:
+        """Waypoints from ``start_map`` to ``goal_map`` (the goal last) keeping
+        :attr:`keep_off_m` off the site's obstacles; None when boxed in."""
+        return route(start_map, goal_map, self.obstacles, self.keep_off_m)
 
     def target_lost(self) -> Transition | None:
         """TARGET_LOST once the target has not been seen for contact.target_lost_hold_s."""

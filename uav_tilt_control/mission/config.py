@@ -37,6 +37,9 @@ class FlightConfig:
     # Between tasks: a touch's target is looked for from this far in front of where the plan
     # says it is (base_link to the wall, on its normal), so that the camera sees it at once.
     look_distance_m: float = param(1.5, lo=0.3, hi=20.0)
+    # APPROACH keeps the vehicle's reach (its tool tip ahead, its rotors round it) this much
+    # more off every obstacle the site lists (site.obstacle_boxes), going round them
+    obstacle_clearance_m: float = param(0.25, lo=0.0, hi=5.0)
 
 
 @dataclasses.dataclass

@@ -14,6 +14,7 @@ from uav_tilt_control.plan import Slide
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.trajectory import MIN_SEGMENT_S, MinJerk, Ramp
 
+DETOUR = 'detour'
 # The touch's alignment check low-passes the tool tip's offset with this time constant:
 # odometry noise (a few mm at the tool's lever arm) averages out, a gust's drift does not.
 ALIGN_TAU_S = 0.1
@@ -29,8 +30,10 @@ class Phase(str, enum.Enum):
 
 
 class Approach(ModeBehaviour):
-    """Fly to the standoff in front of the target, facing its normal; meanwhile measure
-    the F/T's noise (free flight), which sets how firm a touch must be."""
+    """Fly to the standoff in front of the target, facing its normal, round the site's
+    obstacles (phase 'detour', through the corners of their boxes, in map: the target frame
+    is taken up again at the last one); meanwhile measure the F/T's noise (free flight),
+    which sets how firm a touch must be. Boxed in, the task fails ('no_clear_path')."""
 
     mode = Mode.APPROACH
 
@@ -38,6 +41,13 @@ class Approach(ModeBehaviour):
         super().__init__(ctx)
         self._sum_sq_n2 = 0.0
         self._samples = 0
+        self._corners: list[np.ndarray] | None = []    # still to fly to; None: boxed in
+        self._detouring = False
+        self._target: TargetEstimate | None = None
+
+    @property
+    def phase(self) -> str:
+        return DETOUR if self._detouring else ''
 
     def noise_rms_n(self) -> float:
         """The RMS of the F/T's normal reading over the approach (0 before a sample)."""
@@ -45,11 +55,19 @@ class Approach(ModeBehaviour):
 
     def enter(self, previous: Mode, target: TargetEstimate | None) -> None:
         assert target is not None
-        ref = self.ctx.ref
+        ctx, ref = self.ctx, self.ctx.ref
         self._sum_sq_n2, self._samples = 0.0, 0
+        self._target = target
         ref_map = ref.in_map()
         ref.set_target_frame(target)
-        ref.plan_t(ref.standoff_t(), self.ctx.config.contact.approach_speed_m_s, ref_map)
+        path = ctx.route(ref_map[0], ref.standoff_map())
+        self._corners = None if path is None else path[:-1]
+        self._detouring = bool(self._corners)
+        if self._corners:
+            ref.plan_map(self._corners.pop(0), ctx.config.contact.approach_speed_m_s, ref_map)
+            ctx.event('going round an obstacle')
+        elif path is not None:
+            ref.plan_t(ref.standoff_t(), ctx.config.contact.approach_speed_m_s, ref_map)
 
     def tick(self, target: TargetEstimate | None, f_n: float,
              stale: bool) -> Transition | None:
@@ -58,13 +76,37 @@ class Approach(ModeBehaviour):
         # estimate locked, so the segment goes on. It is lost only if the vehicle, at the
         # standoff and facing it, still does not see it.
         ctx = self.ctx
-        ctx.track_target(target)
+        if self._corners is None:
+            return FailTask('no_clear_path')
         self._sum_sq_n2 += f_n * f_n
         self._samples += 1
+        if self._detouring:
+            return self._go_round(target)
+        ctx.track_target(target)
         if ctx.arrived() and ctx.turned():
             return ctx.target_lost() or Enter(Mode.CONTACT)
         if ctx.ref.overdue():
             return Failsafe('unreachable', Mode.LAND)
+        return None
+
+    def _go_round(self, target: TargetEstimate | None) -> Transition | None:
+        """The detour's next corner once the reference is at the one before; from the last,
+        the standoff in the frame of the newest estimate."""
+        ctx, ref = self.ctx, self.ctx.ref
+        if usable(target):
+            self._target = target
+        if ref.overdue():
+            return Failsafe('unreachable', Mode.LAND)
+        if not ref.segment.done(ctx.now_s):
+            return None
+        if self._corners:
+            ref.plan(self._corners.pop(0), ctx.config.contact.approach_speed_m_s)
+        else:
+            self._detouring = False
+            ref_map = ref.in_map()
+            assert self._target is not None     # the one APPROACH was entered with, or newer
+            ref.set_target_frame(self._target)
+            ref.plan_t(ref.standoff_t(), ctx.config.contact.approach_speed_m_s, ref_map)
         return None
 
 

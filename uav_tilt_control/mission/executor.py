@@ -36,6 +36,7 @@ from uav_tilt_control.mission.push import Hold, Retreat, Slide
 from uav_tilt_control.mission.records import TaskRecord
 from uav_tilt_control.mission.reference import Reference
 from uav_tilt_control.mission.search import Search
+from uav_tilt_control.obstacles import ObstacleBox
 from uav_tilt_control.plan import Slide as SlideTask, Touch
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.types import ImpedanceSetpoint
@@ -51,13 +52,15 @@ class Mission:
                  contact_force_n: float = DEFAULT_CONTACT_FORCE_N,
                  drop_target: typing.Callable[[], None] | None = None,
                  plan: list[Task] | None = None,
-                 on_task: typing.Callable[[Task], None] | None = None) -> None:
+                 on_task: typing.Callable[[Task], None] | None = None,
+                 obstacles: typing.Sequence[ObstacleBox] = ()) -> None:
         """``drop_target()``: makes the target estimate forget a candidate SEARCH did not
         confirm (the estimator's reset); ``plan``: the tasks (uav_tilt_control.plan) that
         :meth:`inspect` runs, by default one touch of the target with ``contact_force_n``
         for contact.hold_time_s, forces checked by whoever made them
         (controller_core.plan_of); ``on_task(task)``: called as each task starts (the
-        estimator then aims at the task's target)."""
+        estimator then aims at the task's target); ``obstacles``: the site's, which the
+        approach goes round."""
         self.vehicle = vehicle
         self.config = config or MissionConfig()
         cfg = self.config
@@ -69,6 +72,7 @@ class Mission:
         self.plan: list[Task] = list(plan) if plan is not None else [
             Touch('', None, None, float(contact_force_n), cfg.contact.hold_time_s)]
         self._ctx = ctx = Context(vehicle, cfg, self.plan, self._event)
+        ctx.obstacles = list(obstacles)
         ctx.push_n = float(contact_force_n)
         ctx.drop_target = drop_target
         self._on_task = on_task

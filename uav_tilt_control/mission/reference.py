@@ -149,6 +149,21 @@ class Reference:
         p, v, a = self.sample()
         self.segment = MinJerk(self.clock.now_s, p, goal_map, v_max, v, a)
 
+    def plan_map(self, goal_map: np.ndarray, v_max: float, ref_map: Sample) -> None:
+        """New segment in map from ``ref_map`` = (p_map, v_map, a_map), the reference as it
+        was before the frame changed; map becomes the working frame (the target frame is
+        kept for later)."""
+        self.frame = Pose.identity()
+        self.tool_shift_t = np.zeros(3)
+        p, v, a = ref_map
+        self.segment = MinJerk(self.clock.now_s, p, goal_map, v_max, v, a)
+
+    def standoff_map(self) -> np.ndarray:
+        """The body's place at the standoff of the target frame, in map."""
+        assert self.target_frame is not None
+        frame = self.target_frame.frame
+        return frame.p + frame.R @ (self.standoff_t() + self.target_frame.tool_shift_t)
+
     def plan_t(self, goal_t: np.ndarray, v_max: float, ref_map: Sample | None = None) -> None:
         """New segment in the working frame t from the current reference (``ref_map`` =
         (p_map, v_map, a_map) when the frame has just changed)."""

@@ -1,9 +1,11 @@
 """SEARCH: turn where the vehicle is, at three altitudes, then face the wall vision saw most,
-until a candidate target is seen; confirm it (phases 'confirm', 'closer') before APPROACH.
+then the faces of the site's structures turned away from where the search began, until a
+candidate target is seen; confirm it (phases 'confirm', 'closer') before APPROACH.
 
 Phases: 'sweep' (turning), 'climb' and 'descend' (to the next altitude), 'face' (to a point
-in front of the wall), 'confirm', 'closer' (to look at a far candidate again), 'clear'
-(backing off what the tool touched). See SearchConfig.
+in front of the wall or a structure's face, round the site's obstacles), 'confirm', 'closer'
+(to look at a far candidate again), 'clear' (backing off what the tool touched). See
+SearchConfig.
 """
 import math
 
@@ -13,6 +15,7 @@ from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
 from uav_tilt_control.mission.base import (Context, Enter, FailTask, ModeBehaviour,
                                            Transition, usable)
+from uav_tilt_control.obstacles import face_views
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.walls import WallMemory
 
@@ -37,8 +40,11 @@ class Search(ModeBehaviour):
         self.swept_rad = 0.0
         self.turn_rad = 2.0 * math.pi   # what this sweep turns
         self.walls = WallMemory()
-        self.face_points: list[np.ndarray] | None = None  # to face the wall from, once planned
+        # (point, yaw) to face a wall or a structure from, once planned
+        self.face_points: list[tuple[np.ndarray, float]] | None = None
+        self.legs: list[np.ndarray] = []    # the way to the point under way, corner by corner
         self.face_yaw = 0.0
+        self.origin = np.zeros(3)           # where the search began
         self.resume_phase = SWEEP
         self.since_s = 0.0
         self.ignore_until_s = -math.inf
@@ -57,6 +63,7 @@ class Search(ModeBehaviour):
         ref.plan(ref.in_map()[0], self.ctx.config.flight.hover_speed_m_s)
         ref.yaw_goal = ref.yaw_ref
         self._reset()
+        self.origin = ref.in_map()[0]
 
     def observe_plane(self, point_map: np.ndarray, normal_map: np.ndarray,
                       share: float) -> None:
@@ -74,7 +81,7 @@ class Search(ModeBehaviour):
             # met the wall ends there)
             if self._phase in (CLIMB, DESCEND, FACE):
                 self.swept_rad = 0.0      # its turn is still to come
-            self._phase = CLEAR
+            self._phase, self.legs = CLEAR, []
             ctx.back_off(push)
         elif self._phase == CLEAR:
             if ctx.arrived() or ctx.ref.overdue():
@@ -94,6 +101,8 @@ class Search(ModeBehaviour):
                 return FailTask('target_not_found')
         elif self._phase in (CLIMB, DESCEND) and ctx.arrived():
             self._phase, self.swept_rad = SWEEP, 0.0
+        elif self._phase == FACE and ctx.arrived() and self.legs:
+            ctx.ref.plan(self.legs.pop(0), ctx.config.flight.hover_speed_m_s)
         elif self._phase == FACE and ctx.arrived():
             # turn to one side of the wall first, then sweep across it
             ref = ctx.ref
@@ -139,25 +148,44 @@ class Search(ModeBehaviour):
         return False
 
     def _face_next(self) -> bool:
-        """Fly to the next point to face the wall from (planned from the wall seen most
-        on the first call); False when there is none."""
+        """Fly to the next point to face the wall or a structure from (planned on the first
+        call: in front of the wall seen most, then the site's structures' faces turned away
+        from where the search began, one after the nearest), round the site's obstacles;
+        False when there is none left."""
         ctx, cfg = self.ctx, self.ctx.config
         if self.face_points is None:
-            wall = self.walls.best() if cfg.search.face_m > 0.0 else None
-            if wall is None:
-                return False
-            points, self.face_yaw = wall.face_points(
+            self.face_points = self._plan_faces() if cfg.search.face_m > 0.0 else []
+        while self.face_points:
+            goal, yaw = self.face_points.pop(0)
+            path = ctx.route(ctx.ref.in_map()[0], goal)
+            if path is None:
+                continue
+            self.legs, self.face_yaw = path, yaw
+            self._phase, self.turn_rad = FACE, cfg.search.face_turn_rad
+            ctx.ref.plan(self.legs.pop(0), cfg.flight.hover_speed_m_s)
+            ctx.ref.yaw_goal = self.face_yaw - 0.5 * self.turn_rad
+            ctx.event('facing the wall from ({:.2f}, {:.2f}, {:.2f})'.format(*goal))
+            return True
+        return False
+
+    def _plan_faces(self) -> list[tuple[np.ndarray, float]]:
+        """The points to face from and their headings (see :meth:`_face_next`)."""
+        ctx, cfg = self.ctx, self.ctx.config
+        p = ctx.ref.in_map()[0]
+        wall = self.walls.best()
+        points: list[tuple[np.ndarray, float]] = []
+        if wall is not None:
+            ends, yaw = wall.face_points(
                 cfg.search.face_m, cfg.flight.takeoff_altitude_m, cfg.search.face_m)
-            p = ctx.ref.in_map()[0]
-            self.face_points = sorted(points, key=lambda q: float(np.linalg.norm(q - p)))
-        if not self.face_points:
-            return False
-        goal = self.face_points.pop(0)
-        self._phase, self.turn_rad = FACE, cfg.search.face_turn_rad
-        ctx.ref.plan(goal, cfg.flight.hover_speed_m_s)
-        ctx.ref.yaw_goal = self.face_yaw - 0.5 * self.turn_rad
-        ctx.event('facing the wall from ({:.2f}, {:.2f}, {:.2f})'.format(*goal))
-        return True
+            points = [(q, yaw) for q in sorted(ends, key=lambda q: float(np.linalg.norm(q - p)))]
+        views = face_views(ctx.obstacles, cfg.search.face_m, cfg.flight.takeoff_altitude_m,
+                           self.origin, ctx.keep_off_m)
+        here = points[-1][0] if points else p
+        while views:    # the nearest next
+            k = min(range(len(views)), key=lambda i: float(np.linalg.norm(views[i][0] - here)))
+            points.append(views.pop(k))
+            here = points[-1][0]
+        return points
 
     # ---- the candidate ----
 

@@ -66,8 +66,9 @@ def register(sub: 'argparse._SubParsersAction[Any]') -> None:
                         help='draw every range of the world at one of its ends')
     parser.add_argument('--structures', action='store_true',
                         help='draw worlds of structure kinds (wall, corner, pillar, pipe, '
-                             'vertical_pipe, tank, mesh) in place of walls; the JSON gives '
-                             'success by kind')
+                             'vertical_pipe, tank, mesh, pillar_between: a pillar in the '
+                             "approach's way) in place of walls; the JSON gives success by "
+                             'kind')
     parser.add_argument('--set', action='append', metavar='KEY=VALUE',
                         help="as fly's, in every run: a controller parameter or the vehicle's, "
                              "e.g. vehicle.mass_kg=2.0 (not site.*: each run's world has its "

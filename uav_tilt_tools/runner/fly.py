@@ -23,7 +23,7 @@ from uav_tilt_tools.bag.folder import recording_folder
 from uav_tilt_tools.metrics.tasks import failure_of
 from uav_tilt_tools.runner.inprocess import Progress, run_mission
 from uav_tilt_tools.runner.settings import split_settings
-from uav_tilt_tools.runner.site_params import check_reach, site_overrides
+from uav_tilt_tools.runner.site_params import check_reach, obstacle_overrides, site_overrides
 
 if TYPE_CHECKING:     # the vision stack (torch) is imported only for a flight with vision
     from uav_tilt_tools.runner.camera_vision import CameraVision
@@ -55,7 +55,9 @@ def fly(scenario: Scenario, target_source: str = 'vision',
     camera images ``record_images`` keeps (``all``, ``thin``, ``none``:
     :mod:`uav_tilt_tools.bag.images`); ``progress``: see :func:`run_mission`.
     """
-    values = {'target_source': target_source, **(overrides or {})}
+    # the structures are known as a survey lists them, unless the overrides say otherwise
+    values = {'target_source': target_source, **obstacle_overrides(scenario),
+              **(overrides or {})}
     config, vehicle = split_settings(values)
     if duration_s is None:
         duration_s = default_duration_s(plan_of(config, vehicle))

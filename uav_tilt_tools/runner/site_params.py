@@ -1,6 +1,6 @@
-"""The controller's site from a scenario, as a survey would give it: the wall and its
-target ids (uav_tilt_control.site.SiteConfig). A world of structures gives its first wall
-standing on the ground, or none.
+"""The controller's site from a scenario, as a survey would give it: the wall, its target ids
+and every structure as an obstacle box (uav_tilt_control.site.SiteConfig). A world of
+structures gives its first wall standing on the ground, or none.
 
 ``python -m uav_tilt_tools.runner.site_params [SCENARIO [MISSION]]`` prints them as ROS
 arguments, one word a line (``-p``, ``site.wall_yaw_deg:=0.0``, ...), for scripts/launch.sh;
@@ -21,9 +21,10 @@ from uav_tilt_sim.structures import WALL
 
 def site_overrides(scenario: Scenario, hint_uv_m: Sequence[float] | None = None
                    ) -> dict[str, Any]:
-    """Controller parameters that give it the scenario's wall and target ids as a survey
-    would, and the hint (u, v on that wall) when there is one."""
-    out: dict[str, Any] = {'site.target_ids': target_ids(scenario)}
+    """Controller parameters that give it the scenario's wall, target ids and structures as a
+    survey would, and the hint (u, v on that wall) when there is one."""
+    out: dict[str, Any] = {'site.target_ids': target_ids(scenario),
+                           **obstacle_overrides(scenario)}
     # the site's wall stands on the ground (its ground line's x, y)
     wall = next((c for c in structures_of(scenario)
                  if c.kind == WALL and c.position_m[2] == 0.0), None)
@@ -36,6 +37,14 @@ def site_overrides(scenario: Scenario, hint_uv_m: Sequence[float] | None = None
     if hint_uv_m is not None:
         out['site.target_hint_uv_m'] = [float(v) for v in hint_uv_m]
     return out
+
+
+def obstacle_overrides(scenario: Scenario) -> dict[str, Any]:
+    """``site.obstacle_boxes``: every structure of ``scenario`` as an upright box that holds
+    it (:meth:`uav_tilt_sim.structures.Structure.plan_box`), as a survey would list them."""
+    geometry, _ = world_geometry(scenario)
+    return {'site.obstacle_boxes': [float(v) for g in geometry for box in [g.plan_box()]
+                                    for v in (*box[0], *box[1], box[2])]}
 
 
 def check_reach(scenario: Scenario, touched: Iterable[str], max_pitch_rad: float) -> None:
