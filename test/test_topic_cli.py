@@ -7,6 +7,7 @@ import time
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import Imu
 
 from ros_graph import REPO, Probe, start, status_values, stop
 from uav_tilt_common import names, ros_qos
@@ -27,14 +28,17 @@ def cli(*args):
 
 @pytest.fixture(scope='module')
 def plant(tmp_path_factory):
-    """A realtime plant without camera, and its last status."""
+    """A realtime plant without camera, and its last status. It is up once its IMU flows:
+    a status alone may come from the plant of a test before, still shutting down."""
     log = tmp_path_factory.mktemp('topic_cli') / 'plant.log'
     proc = start('uav_tilt_sim.plant_node', log_path=log,
                  params={'mode': 'realtime', 'rtf': RTF, 'camera_enabled': 'false',
                          'status_rate_hz': 10.0})
     probe = Probe()
     probe.record(names.PLANT_STATUS, DiagnosticArray, ros_qos.STATUS)
-    assert probe.spin_until(lambda: probe.messages[names.PLANT_STATUS], 60.0), log.read_text()
+    probe.record(names.IMU, Imu, ros_qos.CONTROL)
+    assert probe.spin_until(lambda: probe.messages[names.PLANT_STATUS]
+                            and probe.messages[names.IMU], 60.0), log.read_text()
     yield probe
     probe.close()
     stop(proc)
