@@ -37,11 +37,18 @@ class ObstacleBox:
     def z_range_m(self) -> tuple[float, float]:
         return (self.centre_m[2] - self.size_m[2] / 2.0, self.centre_m[2] + self.size_m[2] / 2.0)
 
+    def _R(self) -> NDArray[np.float64]:
+        """The box's plan axes in map (columns)."""
+        c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
+        return np.array([[c, -s], [s, c]])
+
     def to_local(self, xy_map: ArrayLike) -> NDArray[np.float64]:
         """Map (x, y) points (..., 2) in the box's own plan axes, from its centre."""
-        c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
-        d = np.asarray(xy_map, dtype=float) - self.centre_m[:2]
-        return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1)
+        return (np.asarray(xy_map, dtype=float) - self.centre_m[:2]) @ self._R()
+
+    def to_map(self, xy_local: ArrayLike) -> NDArray[np.float64]:
+        """Points (..., 2) in the box's plan axes back in map (:meth:`to_local`'s inverse)."""
+        return np.asarray(self.centre_m[:2]) + np.asarray(xy_local, dtype=float) @ self._R().T
 
     def distance_xy(self, xy_map: ArrayLike) -> float:
         """Distance in plan from a map point to the box (0 inside)."""
@@ -109,10 +116,7 @@ def route(start_map: ArrayLike, goal_map: ArrayLike, boxes: Sequence[ObstacleBox
     nodes = [start[:2], goal[:2]]
     for box, half in grown:
         corners = np.array([[sx, sy] for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
-        local = corners * (half + CORNER_OUT_M / math.sqrt(2.0))
-        c, s = math.cos(math.radians(box.yaw_deg)), math.sin(math.radians(box.yaw_deg))
-        R = np.array([[c, -s], [s, c]])
-        nodes.extend(np.asarray(box.centre_m[:2]) + local @ R.T)
+        nodes.extend(box.to_map(corners * (half + CORNER_OUT_M / math.sqrt(2.0))))
     path = _shortest(nodes, grown)
     if path is None:
         return None
