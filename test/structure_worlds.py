@@ -23,19 +23,17 @@ def closest_approach_m(record_dir, scenario, structure_id, vehicle):
     the least distance from its outline (the four rotor centres at the arms' ends, the arms
     along y, and the tool tip, from the ground-truth odometry) to the structure's box, in
     plan."""
+    from uav_tilt_control.obstacles import ObstacleBox
     from uav_tilt_sim.scenario import world_geometry
     from uav_tilt_tools.bag import reader
     geometry, _ = world_geometry(scenario)
     box = next(g for g in geometry if g.cfg.id == structure_id)
-    centre, size, yaw_deg = box.plan_box()
-    c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    plan_box = ObstacleBox(*box.plan_box())
     outline = np.array([[sx * vehicle.l2_m, sy * vehicle.l1_m, 0.0]
                         for sx in (-1, 1) for sy in (-1, 1)] + [[vehicle.tool_tip_x_m, 0, 0]])
     rec = reader.load_recording(str(record_dir))
     nearest = np.inf
     for p, R in reader.vehicle_poses(rec).values():
-        d = (p + outline @ R.T)[:, :2] - centre[:2]
-        local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
-        gap = np.linalg.norm(np.maximum(np.abs(local) - size[:2] / 2, 0.0), axis=1)
-        nearest = min(nearest, float(gap.min()))
+        for q in (p + outline @ R.T):
+            nearest = min(nearest, plan_box.distance_xy(q[:2]))
     return nearest
