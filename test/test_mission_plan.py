@@ -11,6 +11,7 @@ from uav_tilt_common.config import from_dict
 from uav_tilt_control.mission import Mission, MissionConfig, Mode
 from uav_tilt_control.mission.base import ModeBehaviour
 from uav_tilt_control.plan import Slide, Touch
+from uav_tilt_control.surfaces import SurfacePath
 from uav_tilt_control.target_estimator import TargetEstimate
 from test_mission import DT_S, VEHICLE, Flight, touch_ticks
 
@@ -21,10 +22,16 @@ TARGETS = {'a': np.array([WALL_X_M, 0.5, 1.4]), 'b': np.array([WALL_X_M, -0.6, 1
 LINE = np.array([[WALL_X_M, -1.3, 1.0], [WALL_X_M, -1.3, 2.0]])   # 1 m up the wall
 
 
+def _slide(line):
+    """A slide along ``line`` on the flat wall (its vertices the path's)."""
+    return Slide(SurfacePath(line.copy(), np.tile(NORMAL, (len(line), 1)),
+                             list(range(len(line)))), 0.1, 5.0)
+
+
 def _plan(slide_first=False):
     touches = [Touch('a', TARGETS['a'] + [0.0, 0.1, 0.1], NORMAL, 5.0, 2.0),
                Touch('b', TARGETS['b'] + [0.0, -0.2, 0.1], NORMAL, 8.0, 1.0)]
-    slide = Slide(LINE.copy(), NORMAL, 0.1, 5.0)
+    slide = _slide(LINE)
     return [slide, *touches] if slide_first else [*touches, slide]
 
 
@@ -179,7 +186,7 @@ def test_a_tool_tip_that_does_not_follow_the_line_fails_the_slide(line):
     reference slides on: the slide fails once the reference is slide_path_tolerance_m ahead
     along the line, not when the line's time is up (the vehicle pitches against what holds
     the tool meanwhile: a real one tipped over)."""
-    slide = Slide(line.copy(), NORMAL, 0.1, 5.0)
+    slide = _slide(line)
     plan = [slide, *_plan()[:1]]
     flight = PlanFlight(plan, stuck=True).fly()
     records = flight.mission.records

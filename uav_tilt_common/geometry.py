@@ -210,6 +210,17 @@ def wall_rotation(yaw_deg: float, inclination_deg: float) -> NDArray[np.float64]
     return np.column_stack([cross3(up, normal), up, normal])
 
 
+def cylinder_rotation(yaw_deg: float, elevation_deg: float) -> NDArray[np.float64]:
+    """Columns (c1, c2, axis): the axis at heading yaw, elevation above horizontal; c1 the
+    horizontal side (heading yaw + 90 deg), c2 = axis x c1 (up for a horizontal axis). An
+    angle theta about the axis is the radial cos(theta) c1 + sin(theta) c2."""
+    yaw, el = math.radians(yaw_deg), math.radians(elevation_deg)
+    axis = np.array([math.cos(el) * math.cos(yaw), math.cos(el) * math.sin(yaw),
+                     math.sin(el)])
+    c1 = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    return np.column_stack([c1, cross3(axis, c1), axis])
+
+
 def wall_point(position_m: Vector, yaw_deg: float,
                inclination_deg: float, u_m: float, v_m: float) -> NDArray[np.float64]:
     """Map point at (u right, v up) on the surface of a wall whose ground line passes

@@ -90,7 +90,7 @@ def plan_of(cfg: ControllerConfig, vehicle: VehicleParams | None = None) -> list
     if not cfg.plan_file:
         return one_touch_plan(cfg.site.check(), cfg.contact_force, m.contact.hold_time_s)
     return load_plan(resources.resolve(cfg.plan_file, 'plan_file'), cfg.site, forces,
-                     m.lowest_hover_m(), m.slide.path_tolerance_m)
+                     m.lowest_hover_m(), m.slide.path_tolerance_m, m.contact.max_pitch_rad)
 
 
 class ControllerCore:

@@ -8,12 +8,15 @@ for another and lambda_d, dlambda_d and ddlambda_d stay consistent:
 - :class:`Ramp`: constant velocity, the guarded move of a touch;
 - :class:`Cruise`: a straight line at a cruise speed with smooth speed-up and slow-down,
   and :class:`PolylineCruise`, one Cruise per leg of a polyline (at rest at each vertex):
-  the tool tip sliding along the surface.
+  the tool tip sliding along a plane, and :class:`SurfaceCruise`, the same along a path on
+  any surface, with the surface's normal where the reference is.
 """
 from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from uav_tilt_control.surfaces import SurfacePath
 
 # Shortest reference segment: bounds the accelerations of a segment that only has to
 # bring the reference velocity to rest.
@@ -229,3 +232,61 @@ class PolylineCruise:
                 return (covered + leg.distance(t_s)[0]) / self.length
             covered += leg.length
         return 1.0
+
+
+class SurfaceCruise:
+    """A slide's reference along a :class:`~uav_tilt_control.surfaces.SurfacePath`: the
+    speed along the path as :class:`PolylineCruise`'s (at rest at each of the path's own
+    vertices), the point on the surface and its normal moving with it. The mission works
+    in a frame that rides on that point, turned to that normal, with the body's reference
+    a fixed offset out along the normal: round a curve that offset point moves faster than
+    the surface's (by offset / radius) and is pulled round harder, which :meth:`sample`
+    feeds forward."""
+
+    def __init__(self, t0_s: float, path: SurfacePath, speed: float, accel: float) -> None:
+        self._points = np.asarray(path.points_map, dtype=float)
+        self._normals = np.asarray(path.normals_map, dtype=float)
+        legs = np.linalg.norm(np.diff(self._points, axis=0), axis=1)
+        self._s = np.concatenate(([0.0], np.cumsum(legs)))
+        # the step of the derivatives: a leg, so that they span the legs round a point
+        self._h = float(legs.mean())
+        self._cruise = PolylineCruise(t0_s, self._s[path.vertices][:, None], speed, accel)
+        self.t0_s, self.T, self.length = t0_s, self._cruise.T, self._cruise.length
+
+    def done(self, t_s: float) -> bool:
+        """True once the reference has reached the path's end."""
+        return self._cruise.done(t_s)
+
+    def progress(self, t_s: float) -> float:
+        """Fraction of the path's length covered by the reference at ``t_s``."""
+        return self._cruise.progress(t_s)
+
+    def at(self, s: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(point, unit normal) ``s`` metres along the path (clamped to it)."""
+        s = min(max(s, 0.0), float(self._s[-1]))
+        k = int(np.clip(np.searchsorted(self._s, s, side='right') - 1, 0, len(self._s) - 2))
+        w = (s - self._s[k]) / (self._s[k + 1] - self._s[k])
+        normal = self._normals[k] + w * (self._normals[k + 1] - self._normals[k])
+        return (self._points[k] + w * (self._points[k + 1] - self._points[k]),
+                normal / np.linalg.norm(normal))
+
+    def sample(self, t_s: float, offset_m: float = 0.0
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                          NDArray[np.float64]]:
+        """(point, unit normal) of the reference at ``t_s`` on the surface, and (v, a) in
+        map of the point ``offset_m`` out along the normal from it."""
+        s_arr, ds_arr, dds_arr = self._cruise.sample(t_s)
+        s, ds, dds = float(s_arr[0]), float(ds_arr[0]), float(dds_arr[0])
+        point, normal = self.at(s)
+
+        def out(x: float) -> NDArray[np.float64]:
+            p, n = self.at(x)
+            return p + n * offset_m
+
+        h, length = self._h, float(self._s[-1])
+        lo, hi = max(s - h, 0.0), min(s + h, length)
+        dq = (out(hi) - out(lo)) / (hi - lo)
+        # the bend, where the path goes on both sides (at its ends the reference is at rest)
+        ddq = (out(hi) - 2.0 * out(s) + out(lo)) / h ** 2 if h <= s <= length - h \
+            else np.zeros(3)
+        return point, normal, dq * ds, dq * dds + ddq * ds ** 2

@@ -13,7 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uav_tilt_common.config import ConfigError, param
-from uav_tilt_common.geometry import cross3, euler_zyx_to_matrix, wall_rotation
+from uav_tilt_common.geometry import (cross3, cylinder_rotation, euler_zyx_to_matrix,
+                                      wall_rotation)
 from uav_tilt_sim.structure_mesh import MeshShape, load_mesh
 
 WALL, BOX, CYLINDER, MESH = 'wall', 'box', 'cylinder', 'mesh'
@@ -60,17 +61,6 @@ class StructureConfig:
                                      doc='contact damping of it and its objects')
     friction: float = param(0.4, lo=0.0, hi=2.0,
                             doc='Coulomb friction coefficient of it and its objects')
-
-
-def cylinder_rotation(yaw_deg: float, elevation_deg: float) -> Array:
-    """Columns (c1, c2, axis): the axis at heading yaw, elevation above horizontal; c1 the
-    horizontal side (heading yaw + 90 deg), c2 = axis x c1 (up for a horizontal axis). An
-    angle theta about the axis is the radial cos(theta) c1 + sin(theta) c2."""
-    yaw, el = math.radians(yaw_deg), math.radians(elevation_deg)
-    axis = np.array([math.cos(el) * math.cos(yaw), math.cos(el) * math.sin(yaw),
-                     math.sin(el)])
-    c1 = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
-    return np.column_stack([c1, cross3(axis, c1), axis])
 
 
 def surface_frame(normal: Array, fallback_up: Array) -> Array:

@@ -1,6 +1,5 @@
 """Modes that push on the wall and leave it: HOLD (a touch's push), SLIDE (the push carried
 along a line) and RETREAT (back to the standoff)."""
-import math
 
 import numpy as np
 
@@ -8,9 +7,9 @@ from uav_tilt_common.modes import Mode
 from uav_tilt_control.mission.base import (Context, Enter, Failsafe, FailTask, ModeBehaviour,
                                            NextTask, TaskDone, Transition)
 from uav_tilt_control.mission.reference import SetpointSample
-from uav_tilt_control.plan import LineProgress, Slide as SlideTask, Touch
+from uav_tilt_control.plan import LineProgress, Slide as SlideTask, Touch, path_distance_m
 from uav_tilt_control.target_estimator import TargetEstimate
-from uav_tilt_control.trajectory import PolylineCruise
+from uav_tilt_control.trajectory import MinJerk, SurfaceCruise
 
 
 class _Pushing(ModeBehaviour):
@@ -70,49 +69,62 @@ class Hold(_Pushing):
 
 
 class Slide(_Pushing):
-    """The tool tip follows the slide's line from where it touched, at the press depth; the
-    task fails once the tip is off the line or held back behind its reference."""
+    """The tool tip follows the slide's path from where it touched, at the press depth: the
+    working frame rides along the path on the surface, turned to its normal there, so that
+    the push follows the normal round a curved surface; the task fails once the tip is off
+    the path or held back behind its reference."""
 
     mode = Mode.SLIDE
     tangential_feedforward = True
 
     def __init__(self, ctx: Context) -> None:
         super().__init__(ctx)
-        self._cruise: PolylineCruise | None = None
-        self._line_t = np.zeros((0, 2))
+        self._cruise: SurfaceCruise | None = None
         self._progress: LineProgress | None = None
+        self._v_map = self._a_map = np.zeros(3)
 
     def enter(self, previous: Mode, target: TargetEstimate | None) -> None:
         super().enter(previous, target)
         ctx, task = self.ctx, self.ctx.task
         assert isinstance(task, SlideTask)
-        depth_z = ctx.ref.segment.p1[2]
-        points_t = np.array([ctx.ref.to_frame(p) for p in task.points_map])
-        points_t[:, 2] = depth_z
-        self._cruise = PolylineCruise(ctx.now_s, points_t, task.speed_m_s,
-                                      ctx.config.slide.accel_m_s2)
-        ctx.ref.follow(self._cruise)
-        self._line_t = points_t[:, :2].copy()
-        self._progress = LineProgress(self._line_t)
+        self._cruise = SurfaceCruise(ctx.now_s, task.path, task.speed_m_s,
+                                     ctx.config.slide.accel_m_s2)
+        self._progress = LineProgress(task.points_map)
+        # in the frame that rides along the path the reference stays at the press depth
+        depth = np.array([0.0, 0.0, ctx.ref.segment.p1[2]])
+        ctx.ref.follow(MinJerk(ctx.now_s, depth, depth, 1.0))
+        self.steer(0.0)
         ctx.event('sliding')
+
+    def steer(self, dt_s: float) -> None:
+        assert self._cruise is not None
+        # the body's reference stays its depth out along the normal (frame z)
+        depth_m = float(self.ctx.ref.segment.p1[2])
+        point, normal, self._v_map, self._a_map = self._cruise.sample(self.ctx.now_s, depth_m)
+        self.ctx.ref.set_target_frame(TargetEstimate(point, normal, 0.0, True))
+
+    def shape(self, sample: SetpointSample) -> None:
+        # the frame's own motion, fed forward
+        R = self.ctx.ref.frame.R
+        sample.v, sample.a = R.T @ self._v_map, R.T @ self._a_map
 
     def progress(self) -> float | None:
         return None if self._cruise is None else self._cruise.progress(self.ctx.now_s)
 
     def tick(self, target: TargetEstimate | None, f_n: float,
              stale: bool) -> Transition | None:
-        ctx, cruise, line = self.ctx, self._cruise, self._progress
-        assert cruise is not None and line is not None
+        ctx, cruise, line, task = self.ctx, self._cruise, self._progress, self.ctx.task
+        assert cruise is not None and line is not None and isinstance(task, SlideTask)
         self.regulate(f_n)
-        # the tool tip as odometry sees it, against the line in the wall's plane
-        tip_t = ctx.ref.tool_tip_t(ctx.vehicle_state)[:2]
+        # the tool tip as odometry sees it, against the path on the surface
+        tip_map = ctx.ref.frame.p + ctx.ref.frame.R @ ctx.ref.tool_tip_t(ctx.vehicle_state)
         tolerance_m = ctx.config.slide.path_tolerance_m
-        along_m = line.update(tip_t)
+        along_m = line.update(tip_map)
         # how far the tool tip is behind its reference along the line (at the line's end
         # time, short of the end): friction, or something on the line, holds it, and the
         # vehicle pitches against it while the reference slides on
         behind_m = cruise.progress(ctx.now_s) * cruise.length - along_m
-        if distance_to_polyline(tip_t, self._line_t) > tolerance_m:
+        if distance_on_surface(tip_map, task.points_map, task.normals_map) > tolerance_m:
             return FailTask('off_line')
         if behind_m > tolerance_m:
             return FailTask('short_of_line')
@@ -168,11 +180,8 @@ class Retreat(ModeBehaviour):
         return sample.push_n > 0.0 or bool(sample.p[2] < self.ctx.vehicle.tool_tip_x_m)
 
 
-def distance_to_polyline(p: np.ndarray, vertices: np.ndarray) -> float:
-    """Distance from the 2-D point ``p`` to the polyline through ``vertices`` (N, 2)."""
-    best = math.inf
-    for a, b in zip(vertices[:-1], vertices[1:]):
-        d = b - a
-        u = min(max(float((p - a) @ d / (d @ d)), 0.0), 1.0)
-        best = min(best, float(np.linalg.norm(p - a - u * d)))
-    return best
+def distance_on_surface(p: np.ndarray, points: np.ndarray, normals: np.ndarray) -> float:
+    """Distance from ``p`` to the path through ``points`` (N, 3) along the surface whose
+    outward normals there are ``normals``: the part along the normal (a tip pressed into a
+    surface that gives way, or lifted off it) left out."""
+    return float(path_distance_m(np.asarray(p, dtype=float)[None, :], points, normals)[0])

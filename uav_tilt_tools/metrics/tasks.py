@@ -14,12 +14,14 @@ reason, contact_lost, t_contact_s = [start, end] of HOLD or SLIDE, ...).
   score (no truth of its target, no push measured: 'unscored'), is no success, its reason
   the bar's;
 - slide: over the slide, the push's RMS error, the tool tip's distance from the requested
-  line in the wall's plane (``path_rms_error_m``, ``path_max_error_m``), the length of line
+  path along the surface (``path_rms_error_m``, ``path_max_error_m``), the length of path
   it covered, measured along the line as the mission measures it (``length_m``,
   :class:`uav_tilt_control.plan.LineProgress`: a line that comes back on itself does not
   fold), and the time it took (``duration_s``).
 
-The push is the contact force along the wall's outward normal (positive pushing).
+The push is the contact force along the surface's outward normal (positive pushing): the
+true wall's for a touch and for a slide on the wall, the site's along a slide's path on a
+cylinder (its ``normals_map``).
 """
 from typing import Any, Iterable, Sequence
 
@@ -28,7 +30,7 @@ import numpy.typing as npt
 
 from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
-from uav_tilt_control.plan import LineProgress
+from uav_tilt_control.plan import LineProgress, path_distance_m
 from uav_tilt_tools.metrics.mission import tool_normal_angles_deg
 
 # The inspection bar (DESIGN section 7): over the hold, the true tool tip within 1 cm of the
@@ -74,9 +76,10 @@ def task_results(tasks: Iterable[dict[str, Any]], t_s: npt.ArrayLike, tip_map: n
                                   (targets or {}).get(task.get('target', '')), wall_normal_map,
                                   None if axes is None else axes[mask]))
         else:
-            normal = _normal(task, wall_normal_map)
-            entry.update(_slide(task, t_s[mask], tip_map[mask], force_map[mask] @ normal,
-                                normal))
+            normals = slide_normals(task, wall_normal_map)
+            tips = tip_map[mask]
+            push = np.sum(force_map[mask] * normals_at(tips, task, normals), axis=1)
+            entry.update(_slide(task, t_s[mask], tips, push, normals))
         missed = entry['success'] and missed_bar(entry)
         if missed:
             # completed by the controller, yet off the bar by the truth (a push that fell
@@ -193,42 +196,59 @@ def _touch(task: dict[str, Any], t_s: np.ndarray, tips: np.ndarray, forces: np.n
     return out
 
 
-def slide_geometry(task: dict[str, Any], tips: npt.ArrayLike, normal: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(distance from the line in the wall's plane, how far along the line the tips have
-    come (:class:`LineProgress`), tips in wall coordinates (u, v)) of each tool tip (N, 3)
-    of slide ``task``, in their order."""
+def slide_normals(task: dict[str, Any], wall_normal_map: npt.ArrayLike | None
+                  ) -> np.ndarray:
+    """The outward normal a slide is judged against: one (3,) on the wall (the true wall's
+    when given), else the site's at each point of its path (M, 3)."""
+    if task.get('on') and task.get('normals_map'):
+        return np.asarray(task['normals_map'], dtype=float)
+    return _normal(task, wall_normal_map)
+
+
+def normals_at(tips: npt.ArrayLike, task: dict[str, Any], normals: np.ndarray) -> np.ndarray:
+    """The normal of :func:`slide_normals` at each tool tip (N, 3): that of the path's point
+    nearest it."""
+    tips = np.asarray(tips, dtype=float).reshape(-1, 3)
+    if normals.ndim == 1:
+        return np.broadcast_to(normals, tips.shape)
     points = np.asarray(task['points_map'], dtype=float)
-    flat = np.eye(3) - np.outer(normal, normal)
-    # the line's own frame: x along the wall (horizontal), y up it, as the wall's (u, v)
-    R, origin = frames.target_frame_from_normal(points[0], normal)
+    nearest = np.argmin(np.linalg.norm(tips[:, None, :] - points[None], axis=2), axis=1)
+    return normals[nearest]
+
+
+def slide_geometry(task: dict[str, Any], tips: npt.ArrayLike, normals: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(distance from the path along the surface, how far along it the tips have come
+    (:class:`LineProgress`), tips in the (u, v) of the plane the path starts in) of each
+    tool tip (N, 3) of slide ``task``, in their order; ``normals``: :func:`slide_normals`.
+    On a wall (u, v) are the wall's coordinates; round a cylinder they are its tangent
+    plane's where the path begins."""
+    points = np.asarray(task['points_map'], dtype=float)
+    first = normals if normals.ndim == 1 else normals[0]
+    # the path's own frame: x along the surface (horizontal), y up it, as a wall's (u, v)
+    R, origin = frames.target_frame_from_normal(points[0], first)
     uv0 = np.asarray(task.get('points_uv') or [[0.0, 0.0]], dtype=float)[0]
     tips = np.asarray(tips, dtype=float).reshape(-1, 3)
-    distance = np.full(len(tips), np.inf)
-    for a, b in zip(points[:-1], points[1:]):
-        d = flat @ (b - a)
-        rel = (tips - a) @ flat
-        u = np.clip(rel @ d / (d @ d), 0.0, 1.0)
-        distance = np.minimum(distance, np.linalg.norm(rel - np.outer(u, d), axis=1))
-    progress = LineProgress(points @ flat)
-    along = np.array([progress.update(tip) for tip in tips @ flat])
+    distance = path_distance_m(tips, points, normals) if len(tips) else np.zeros(0)
+    progress = LineProgress(points)
+    along = np.array([progress.update(tip) for tip in tips])
     uv = uv0 + ((tips - origin) @ R)[:, :2]
     return distance, along, uv
 
 
-def line_uv(task: dict[str, Any], normal: np.ndarray) -> np.ndarray:
-    """The requested line's vertices in the wall coordinates of :func:`slide_geometry`."""
+def line_uv(task: dict[str, Any], normals: np.ndarray) -> np.ndarray:
+    """The requested path's points in the (u, v) of :func:`slide_geometry`."""
     points = np.asarray(task['points_map'], dtype=float)
-    return slide_geometry(task, points, normal)[2]
+    return slide_geometry(task, points, normals)[2]
 
 
 def _slide(task: dict[str, Any], t_s: np.ndarray, tips: np.ndarray, push: np.ndarray,
-           normal: np.ndarray) -> dict[str, Any]:
+           normals: np.ndarray) -> dict[str, Any]:
     out = dict(path_rms_error_m=None, path_max_error_m=None, length_m=0.0, duration_s=0.0,
                line_length_m=task.get('length_m'), **_force_stats(push, task['force_n']))
     if not len(t_s):
         return out
-    distance, along, _ = slide_geometry(task, tips, normal)
+    distance, along, _ = slide_geometry(task, tips, normals)
     out.update(path_rms_error_m=float(np.sqrt(np.mean(distance ** 2))),
                path_max_error_m=float(distance.max()),
                length_m=float(along[-1] - along[0]), duration_s=float(t_s[-1] - t_s[0]))

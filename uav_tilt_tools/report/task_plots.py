@@ -29,8 +29,8 @@ from uav_tilt_common.modes import Mode
 from uav_tilt_tools.bag import reader
 from uav_tilt_tools.bag.reader import Recording
 from uav_tilt_tools.metrics.mission import json_number, mode_samples, runs_of_mode
-from uav_tilt_tools.metrics.tasks import (FORCE_MEAN_BAR_N, POI_BAR_M, line_uv, pushing,
-                                          slide_geometry)
+from uav_tilt_tools.metrics.tasks import (FORCE_MEAN_BAR_N, POI_BAR_M, line_uv, normals_at,
+                                          pushing, slide_geometry, slide_normals)
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (after the headless backend is chosen)
@@ -223,22 +223,22 @@ def plot_slides(rec: Recording, tool_tip_x_m: float, tasks: list[ReportTask]
     targets = reader.target_poses(rec)
     fig, axes = plt.subplots(len(slides), 2, figsize=(11, 4 * len(slides)), squeeze=False)
     for (ax_force, ax_path), task in zip(axes, slides):
-        normal = targets[''][1][:, 2] if '' in targets else np.asarray(task['normal_map'])
+        normals = slide_normals(task, targets[''][1][:, 2] if '' in targets else None)
         mask = pushing(task, t_s)
-        _, along, uv = slide_geometry(task, tips[mask], normal)
+        _, along, uv = slide_geometry(task, tips[mask], normals)
         colour = task_colour(int(task.get('index', 0)))
-        ax_force.plot(along, forces[mask] @ normal, color=colour,
-                      label='push along the normal')
+        push = np.sum(forces[mask] * normals_at(tips[mask], task, normals), axis=1)
+        ax_force.plot(along, push, color=colour, label='push along the normal')
         ax_force.axhline(task['force_n'], color='k', ls='--', label='task force')
         ax_force.set_xlabel('along the line [m]')
         ax_force.set_ylabel('force [N]')
         ax_force.set_title(f"task {task['index']}: slide at {task.get('speed_m_s')} m/s")
-        line = line_uv(task, normal)
+        line = line_uv(task, normals)
         ax_path.plot(line[:, 0], line[:, 1], 'k--', lw=2, label='requested line')
         ax_path.plot(uv[:, 0], uv[:, 1], color=colour, label='tool tip')
         ax_path.set_xlabel('u (right) [m]')
         ax_path.set_ylabel('v (up) [m]')
-        ax_path.set_title('path on the wall')
+        ax_path.set_title('path on the surface')
         ax_path.axis('equal')
         for ax in (ax_force, ax_path):
             ax.grid(True)

@@ -1,6 +1,7 @@
-"""The controller's site from a scenario, as a survey would give it: the wall, its target ids
-and every structure as an obstacle box (uav_tilt_control.site.SiteConfig). A world of
-structures gives its first wall standing on the ground, or none.
+"""The controller's site from a scenario, as a survey would give it: the wall, its target ids,
+its cylinders (by id) and every structure as an obstacle box
+(uav_tilt_control.site.SiteConfig). A world of structures gives its first wall standing on
+the ground, or none.
 
 ``python -m uav_tilt_tools.runner.site_params [SCENARIO [MISSION]]`` prints them as ROS
 arguments, one word a line (``-p``, ``site.wall_yaw_deg:=0.0``, ...), for scripts/launch.sh;
@@ -16,13 +17,13 @@ from uav_tilt_control.mission import MissionConfig
 from uav_tilt_control.reach import check_reachable
 from uav_tilt_sim.scenario import (Scenario, check_target, load_scenario, structures_of,
                                    target_ids, world_geometry)
-from uav_tilt_sim.structures import WALL
+from uav_tilt_sim.structures import CYLINDER, WALL
 
 
 def site_overrides(scenario: Scenario, hint_uv_m: Sequence[float] | None = None
                    ) -> dict[str, Any]:
-    """Controller parameters that give it the scenario's wall, target ids and structures as a
-    survey would, and the hint (u, v on that wall) when there is one."""
+    """Controller parameters that give it the scenario's wall, target ids, cylinders and
+    structures as a survey would, and the hint (u, v on that wall) when there is one."""
     out: dict[str, Any] = {'site.target_ids': target_ids(scenario),
                            **obstacle_overrides(scenario)}
     # the site's wall stands on the ground (its ground line's x, y)
@@ -34,6 +35,12 @@ def site_overrides(scenario: Scenario, hint_uv_m: Sequence[float] | None = None
                     'site.wall_inclination_deg': float(wall.inclination_deg),
                     'site.wall_width_m': float(wall.width_m),
                     'site.wall_height_m': float(wall.height_m)})
+    cylinders = [c for c in structures_of(scenario) if c.kind == CYLINDER and c.id]
+    if cylinders:
+        out.update({'site.cylinder_ids': [c.id for c in cylinders],
+                    'site.cylinders': [float(v) for c in cylinders
+                                       for v in (*c.position_m, c.yaw_deg, c.elevation_deg,
+                                                 c.radius_m, c.length_m)]})
     if hint_uv_m is not None:
         out['site.target_hint_uv_m'] = [float(v) for v in hint_uv_m]
     return out
