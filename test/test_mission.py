@@ -1158,9 +1158,11 @@ def test_the_body_pitches_to_the_wall_at_the_pitch_rate_not_in_a_step():
 
 
 def test_the_tool_tip_meets_a_target_beyond_the_pitch_limit():
-    # a wall leaning back further than the body may pitch: the tool stays 0.2 rad off the
-    # normal, so the body stands off the normal (9 cm here) for the tool tip to meet the POI
-    cfg = from_dict(MissionConfig, {'contact.max_pitch_rad': 0.3})
+    # a wall leaning back further than the body may pitch, touched off square as the margin
+    # allows: the tool stays 0.2 rad off the normal, so the body stands off the normal
+    # (9 cm here) for the tool tip to meet the POI
+    cfg = from_dict(MissionConfig, {'contact.max_pitch_rad': 0.3,
+                                    'contact.reach_margin_rad': 0.25})
     normal = np.array([-np.cos(0.5), 0.0, np.sin(0.5)])
     flight = Flight(cfg, TargetEstimate(P_POI, normal, 0.02, True))
     assert flight.mission.inspect()[0]
@@ -1175,6 +1177,19 @@ def test_the_tool_tip_meets_a_target_beyond_the_pitch_limit():
     assert 'align' not in flight.phases
     flight.run_until(lambda f: f.mission.mode == Mode.IDLE, 60.0)
     assert flight.mission.status['success']
+
+
+def test_a_target_beyond_the_pitch_limit_and_its_margin_is_not_touched():
+    """The same wall at the default margin: the task fails 'unreachable_normal' at the
+    standoff, the vehicle never closing in, and it lands."""
+    cfg = from_dict(MissionConfig, {'contact.max_pitch_rad': 0.3})
+    assert 0.5 > cfg.contact.max_pitch_rad + cfg.contact.reach_margin_rad
+    normal = np.array([-np.cos(0.5), 0.0, np.sin(0.5)])
+    flight = Flight(cfg, TargetEstimate(P_POI, normal, 0.02, True))
+    assert flight.mission.inspect()[0]
+    flight.run_until(lambda f: f.mission.mode == Mode.IDLE and f.t_s > 1.0, 120.0)
+    assert flight.mission.records[0].reason == 'unreachable_normal'
+    assert Mode.CONTACT not in flight.modes and not flight.mission.status['success']
 
 
 def test_the_retreat_lets_go_of_the_push_before_it_leaves_the_wall():

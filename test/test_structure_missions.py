@@ -2,7 +2,8 @@
 with the ground truth of the target: each kind of structure, drawn fresh as a campaign
 draws it (with its wind, noise, mismatch, stiffness and friction), inspected to the bar with
 the tool square on the surface, going round what is in the way; a touch the tool cannot
-sit square on refused before flight; a campaign of structure worlds."""
+sit square on refused before flight, and not touched when flown; a campaign of structure
+worlds."""
 import dataclasses
 import json
 import math
@@ -104,6 +105,28 @@ def test_without_the_site_s_obstacles_the_pillar_is_flown_into_and_boxed_in_fail
     assert not result['success'] and result['tasks'][0]['reason'] == 'no_clear_path', result
     assert result['mode_history'][-1][1] == 'IDLE'
     assert 'APPROACH' in [m for _, m in result['mode_history']]
+
+
+@pytest.mark.parametrize('source', ['vision', 'ground_truth'])
+def test_a_target_found_beyond_the_tool_s_reach_is_not_touched(source):
+    """A target on a pipe's upper or lower side, its normal leaning beyond what the tool
+    pitches to (plus the margin for vision's normal), flown without the plan check: the
+    mission sees where the target is and fails the task 'unreachable_normal' at the
+    standoff, never touching, and lands."""
+    contact = MissionConfig().contact
+    beyond_deg = math.degrees(contact.max_pitch_rad + contact.reach_margin_rad)
+    rng = np.random.default_rng(fresh_seed())
+    seed = fresh_seed()
+    scenario, _, _ = structure_draw(seed, 'pipe')
+    angle = float(rng.choice([-1.0, 1.0]) * rng.uniform(beyond_deg + 5.0, 50.0))
+    scenario = dataclasses.replace(scenario, objects=[
+        dataclasses.replace(o, angle_deg=angle) for o in scenario.objects])
+    result = fly(scenario, target_source=source)
+    modes = [m for _, m in result['mode_history']]
+    details = (seed, angle, result['failure'], modes)
+    assert result['tasks'][0]['reason'] == 'unreachable_normal', details
+    assert 'CONTACT' not in modes and modes[-1] == 'IDLE', details
+    assert result['max_force_n'] < contact.threshold_n, details
 
 
 def test_a_pipe_s_top_and_underside_are_refused_with_the_reachable_range(tmp_path, capsys):

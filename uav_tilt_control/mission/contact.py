@@ -11,6 +11,7 @@ from uav_tilt_control.mission.base import (Context, Enter, Failsafe, FailTask, M
                                            Transition, usable)
 from uav_tilt_control.mission.reference import SetpointSample
 from uav_tilt_control.plan import Slide
+from uav_tilt_control.reach import normal_elevation_rad
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.trajectory import MIN_SEGMENT_S, MinJerk, Ramp
 
@@ -84,9 +85,22 @@ class Approach(ModeBehaviour):
             return self._go_round(target)
         ctx.track_target(target)
         if ctx.arrived() and ctx.turned():
-            return ctx.target_lost() or Enter(Mode.CONTACT)
+            return self._unreachable() or ctx.target_lost() or Enter(Mode.CONTACT)
         if ctx.ref.overdue():
             return Failsafe('unreachable', Mode.LAND)
+        return None
+
+    def _unreachable(self) -> Transition | None:
+        """FailTask('unreachable_normal') when the estimate at the standoff says the tool,
+        pitched within contact.max_pitch_rad, cannot sit square on the target (the top or
+        the underside of a pipe): the plan check cannot know where vision finds it."""
+        cfg, frame = self.ctx.config.contact, self.ctx.ref.target_frame
+        assert frame is not None        # the approach works in it
+        elevation = normal_elevation_rad(frame.frame.R[:, 2])
+        if abs(elevation) > cfg.max_pitch_rad + cfg.reach_margin_rad:
+            self.ctx.event(f'the target\'s surface faces {math.degrees(elevation):+.0f} deg: '
+                           f'out of the tool\'s reach')
+            return FailTask('unreachable_normal')
         return None
 
     def _go_round(self, target: TargetEstimate | None) -> Transition | None:
