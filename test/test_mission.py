@@ -43,16 +43,16 @@ class Flight:
 
     ``target``: what vision reports each tick (:meth:`seen`); ``wall``: (a point on it, its
     normal, how far from that point it reaches), by default the target's, within 1 m;
-    ``plan``: the mission's plan; :attr:`thrust_up_n`: the vertical thrust the flight core
-    asks for, the model's weight (a vehicle as heavy as its model, in the air) unless a test
-    sets it.
+    ``plan``: the mission's plan; ``obstacles``: the site's; :attr:`thrust_up_n`: the
+    vertical thrust the flight core asks for, the model's weight (a vehicle as heavy as its
+    model, in the air) unless a test sets it.
     """
 
-    def __init__(self, config=None, target=PERFECT, plan=None, wall=None):
+    def __init__(self, config=None, target=PERFECT, plan=None, wall=None, obstacles=()):
         self.config = config or MissionConfig()
         self.target = target
         self.wall = wall or (target.p_poi_map, target.normal_map, 1.0)
-        self.mission = Mission(VEHICLE, self.config, plan=plan)
+        self.mission = Mission(VEHICLE, self.config, plan=plan, obstacles=obstacles)
         self.t_s = 0.0
         self.p = np.array([0.0, 0.0, GEAR_Z_M])
         self.v = np.zeros(3)

@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 from uav_tilt_common.config import from_dict
 from uav_tilt_control.mission import Mission, MissionConfig, Mode
 from uav_tilt_control.mission.base import ModeBehaviour
+from uav_tilt_control.obstacles import ObstacleBox
 from uav_tilt_control.plan import Slide, Touch
 from uav_tilt_control.surfaces import SurfacePath
 from uav_tilt_control.target_estimator import TargetEstimate
@@ -18,7 +19,9 @@ from test_mission import DT_S, VEHICLE, Flight, touch_ticks
 TIP = VEHICLE.tool_tip_x_m
 WALL_X_M = 3.0
 NORMAL = np.array([-1.0, 0.0, 0.0])                 # out of the wall, towards the start
-TARGETS = {'a': np.array([WALL_X_M, 0.5, 1.4]), 'b': np.array([WALL_X_M, -0.6, 1.8])}
+TARGETS = {'a': np.array([WALL_X_M, 0.5, 1.4]), 'b': np.array([WALL_X_M, -0.6, 1.8]),
+           # far apart on the wall, a pillar between them (test_the_transit_goes_round...)
+           'c': np.array([WALL_X_M, 1.6, 1.5]), 'd': np.array([WALL_X_M, -1.6, 1.5])}
 LINE = np.array([[WALL_X_M, -1.3, 1.0], [WALL_X_M, -1.3, 2.0]])   # 1 m up the wall
 
 
@@ -40,12 +43,13 @@ class PlanFlight(Flight):
     ``unseen``: targets vision never finds; ``yaw_error_rad``: added to the odometry's yaw
     while sliding (a tool swung aside)."""
 
-    def __init__(self, plan, config=None, unseen=(), yaw_error_rad=0.0, stuck=False):
+    def __init__(self, plan, config=None, unseen=(), yaw_error_rad=0.0, stuck=False,
+                 obstacles=()):
         self.unseen, self.yaw_error_rad, self.stuck = set(unseen), yaw_error_rad, stuck
         self._stuck_p_map = None
         super().__init__(config or from_dict(MissionConfig, {'search.timeout_s': 4.0}),
                          target=None, plan=plan,
-                         wall=(TARGETS['a'], NORMAL, np.inf))
+                         wall=(TARGETS['a'], NORMAL, np.inf), obstacles=obstacles)
 
     def seen(self):
         task = self.mission.task
@@ -280,3 +284,26 @@ def test_one_noisy_force_reading_is_not_the_wall():
     flight.step(force_n=flight.config.contact.touch_threshold_n + 0.5)
     flight.run_until(lambda f: f.mission.phase != 'close')
     assert flight.mission.phase == 'touch'
+
+
+def test_the_transit_between_two_touches_goes_round_a_pillar_in_its_way():
+    """Two touches either side of a pillar standing out from the wall: from the first
+    touch's standoff to where the second is looked at, the straight way crosses the
+    pillar; the transit goes round it (the wall too is an obstacle of the site), the body
+    never nearer it than the vehicle's reach and the clearance, and both touches are made."""
+    pillar = ObstacleBox((1.75, 0.0, 1.5), (0.3, 0.3, 3.0), 0.0)
+    wall = ObstacleBox((WALL_X_M + 0.1, 0.0, 1.75), (0.2, 8.0, 3.5), 0.0)
+    plan = [Touch('c', TARGETS['c'] + [0.0, -0.1, 0.1], NORMAL, 5.0, 1.0),
+            Touch('d', TARGETS['d'] + [0.0, 0.1, -0.1], NORMAL, 5.0, 1.0)]
+    flight = PlanFlight(plan, obstacles=[pillar, wall]).fly()
+    assert [r.success for r in flight.mission.records] == [True, True]
+    keep_off_m = flight.mission._ctx.keep_off_m
+    held_s = next(t for t, mode, _, _ in flight.log if mode == Mode.HOLD)
+    # from the first touch to the second (the flight to the first starts at take-off)
+    transit = [p for (t, mode, _, p), phase in zip(flight.log, flight.phases)
+               if mode == Mode.HOVER and phase == 'transit' and t > held_s]
+    assert transit
+    # the straight way would have crossed it
+    a, b = transit[0][:2], transit[-1][:2]
+    assert min(pillar.distance_xy(a + (b - a) * k) for k in np.linspace(0, 1, 101)) == 0.0
+    assert min(pillar.distance_xy(p[:2]) for p in transit) >= keep_off_m * 0.99

@@ -11,8 +11,8 @@ import numpy as np
 
 from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
-from uav_tilt_control.mission.base import (Context, Enter, Failsafe, Landed, ModeBehaviour,
-                                           NextTask, Transition)
+from uav_tilt_control.mission.base import (Context, Enter, Failsafe, FailTask, Landed,
+                                           ModeBehaviour, NextTask, Transition)
 from uav_tilt_control.mission.detectors import LandDetector
 from uav_tilt_control.mission.reference import yaw_of
 from uav_tilt_control.target_estimator import TargetEstimate
@@ -105,12 +105,19 @@ class Takeoff(_FreeFlight):
 
 class Hover(_FreeFlight):
     """Hold the hover point (moved by setpoints), start the plan's first task once settled,
-    or fly to the next task's target (phase 'transit') and SEARCH there."""
+    or fly to the next task's target (phase 'transit', round the site's obstacles as the
+    approach goes: at rest at each corner) and SEARCH there; boxed in, the task fails
+    ('no_clear_path')."""
 
     mode = Mode.HOVER
 
+    def __init__(self, ctx: Context) -> None:
+        super().__init__(ctx)
+        self._corners: list[np.ndarray] | None = []     # still to fly to; None: boxed in
+
     def enter(self, previous: Mode, target: TargetEstimate | None) -> None:
         self._phase = ''
+        self._corners = []
         ref = self.ctx.ref
         ref.to_map()
         ref.plan(ref.in_map()[0], self.ctx.config.flight.hover_speed_m_s)
@@ -120,7 +127,10 @@ class Hover(_FreeFlight):
         """Fly to ``look_map``, the camera looking along ``view_map``."""
         ctx, cfg = self.ctx, self.ctx.config
         self._phase = TRANSIT
-        ctx.ref.plan(look_map, cfg.flight.hover_speed_m_s)
+        path = ctx.route(ctx.ref.in_map()[0], look_map)
+        self._corners = None if path is None else path[1:]
+        if path is not None:
+            ctx.ref.plan(path[0], cfg.flight.hover_speed_m_s)
         ctx.ref.yaw_goal = frames.yaw_facing(view_map, default_rad=ctx.ref.yaw_ref)
         pitch = frames.pitch_facing(view_map) if cfg.contact.pitch_to_normal else 0.0
         ctx.ref.pitch_goal = min(max(pitch, -cfg.contact.max_pitch_rad),
@@ -146,7 +156,13 @@ class Hover(_FreeFlight):
                     # in HOVER a task runs only in transit to its target: look from here
                     return Enter(Mode.SEARCH, 'searching from where it backed off')
         elif self._phase == TRANSIT:
-            if ctx.arrived() and ctx.turned():
+            if self._corners is None:
+                self._phase = ''
+                return FailTask('no_clear_path')
+            if self._corners:
+                if ctx.ref.segment.done(ctx.now_s):
+                    ctx.ref.plan(self._corners.pop(0), ctx.config.flight.hover_speed_m_s)
+            elif ctx.arrived() and ctx.turned():
                 self._phase = ''
                 return Enter(Mode.SEARCH)
             if ctx.ref.overdue():
