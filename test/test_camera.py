@@ -66,19 +66,31 @@ def test_spheres_render_where_the_intrinsics_project_them(renderers, kind):
     assert np.all(np.abs(np.mean(errors, axis=0)) < 0.1)
 
 
-def test_both_renderers_draw_the_same_flight_views(renderers):
-    """Views of the default world from along an approach: wall, objects and the tool."""
-    rng = np.random.default_rng(20261201)
-    scenario = load_scenario()
+# (scenario file, the region the vehicle is put in: x, y, z ranges and the yaw's, rad)
+VIEWS = {
+    # the default world from along an approach: wall, objects and the tool
+    'wall': (None, ((0.3, 1.6), (-0.5, 0.5), (1.0, 2.0), (-0.4, 0.4))),
+    # the world of structures from anywhere before them, looking any way: the pipes, the
+    # tank, the pillar and the mesh from every side the camera meets them
+    'structures': ('config/scenarios/structures.yaml',
+                   ((0.0, 2.0), (-1.5, 1.5), (1.0, 2.5), (-np.pi, np.pi))),
+}
+
+
+@pytest.mark.parametrize('world', VIEWS)
+def test_both_renderers_draw_the_same_flight_views(renderers, world):
+    """Views from where a flight goes, drawn by both: the GL renderer leaves out the faces
+    turned away from the camera, which must change nothing."""
+    rng = np.random.default_rng()
+    scenario_file, region = VIEWS[world]
+    scenario = load_scenario(scenario_file)
     plant = Plant(PlantCoreConfig(), scenario)
     try:
         checked = 0
         for _ in range(8):
-            scenario_start = [rng.uniform(0.3, 1.6), rng.uniform(-0.5, 0.5),
-                              rng.uniform(1.0, 2.0)]
+            (x, y, z, yaw) = (rng.uniform(*r) for r in region)
             p.resetBasePositionAndOrientation(
-                plant.body, scenario_start,
-                p.getQuaternionFromEuler([0, 0, rng.uniform(-0.4, 0.4)]),
+                plant.body, [x, y, z], p.getQuaternionFromEuler([0, 0, yaw]),
                 physicsClientId=plant.client)
             plant.step()
             pose = plant.camera_pose()

@@ -3,7 +3,8 @@
 Draws the :class:`~uav_tilt_sim.visuals.Scene` of a physics client with the poses PyBullet
 has for its bodies, in one pass into three attachments: colour, metric depth (optical-frame
 z, float32) and the body id. The shading is TinyRenderer's, so that both renderers make the
-same images of the same world: texel colour times (ambient + diffuse (n . l) + specular
+same images of the same world (every surface is closed, or seen from its front only: the
+faces turned away are not drawn): texel colour times (ambient + diffuse (n . l) + specular
 (r_z)^2) with the light colour on the last two, nearest-texel sampling, no shadows. The
 lighting is computed per vertex: exact on the flat faces this world is made of.
 """
@@ -171,7 +172,11 @@ class GlRenderer:
         view_projection = self._projection @ _view_matrix(p_cam_map, R_map_cam)
         light = np.asarray(lighting.direction, dtype=float)
         self.fbo.use()
-        self.ctx.enable(self._gl.DEPTH_TEST)
+        # Faces turned away from the camera are hidden behind the others of their closed
+        # surface, so they are not drawn (half the rasterising; the images are the same).
+        # The projection flips y, so the turned-away faces wind as GL's 'front' ones.
+        self.ctx.cull_face = 'front'
+        self.ctx.enable(self._gl.DEPTH_TEST | self._gl.CULL_FACE)
         # white where nothing is drawn, as TinyRenderer; depth and body 0 there
         self.fbo.color_mask = _COLOR_ONLY
         self.fbo.clear(1.0, 1.0, 1.0, 1.0, depth=1.0)
