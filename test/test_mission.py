@@ -15,6 +15,7 @@ from uav_tilt_common.state import VehicleState
 from uav_tilt_common.vehicle import GRAVITY, VehicleParams
 from uav_tilt_common.modes import Mode
 from uav_tilt_control.impedance import ImpedanceConfig
+from uav_tilt_control.obstacles import ObstacleBox
 from uav_tilt_control.mission import Mission, MissionConfig
 from uav_tilt_control.trajectory import MinJerk
 from uav_tilt_control.target_estimator import TargetEstimate
@@ -1222,3 +1223,40 @@ def test_a_failsafe_at_the_wall_lets_go_of_the_push_as_it_descends():
               for _ in range(int(round(cfg.contact.press_time_s / DT_S)) + 2)]
     assert pushes[0] > 0.5 * flight.mission.contact_force_n
     assert np.all(np.diff(pushes) <= 1e-12) and pushes[-1] == 0.0
+
+
+class GlimpseFlight(Flight):
+    """Vision sees the target on two frames of the search, then never: too few measurements
+    to confirm it, so the search moves closer to look again."""
+
+    def __init__(self, config, target, obstacles):
+        self._glimpses = 2
+        super().__init__(config, target, obstacles=obstacles,
+                         wall=(target.p_poi_map, target.normal_map, 10.0))
+
+    def seen(self):
+        if self.mission.mode == Mode.SEARCH and self._glimpses:
+            self._glimpses -= 1
+            return self.target
+        return None
+
+
+def test_the_move_closer_to_a_far_candidate_goes_round_obstacles():
+    """A far candidate glimpsed twice, a pillar between it and the vehicle: the search moves
+    closer to look again round the pillar, the body never nearer it than the vehicle's
+    reach and the clearance, and drops the candidate when it is not seen again."""
+    far = TargetEstimate(np.array([7.0, 0.0, 1.5]), NORMAL, 0.02, True)
+    pillar = ObstacleBox((3.0, 0.0, 1.5), (0.4, 0.4, 3.0), 0.0)
+    flight = GlimpseFlight(MissionConfig(), far, [pillar])
+    assert flight.mission.inspect()[0]
+    flight.run_until(lambda f: f.mission.phase == 'closer', 60.0)
+    flight.run_until(lambda f: f.mission.phase != 'closer', 60.0)
+    closer = [p for (_, _, _, p), phase in zip(flight.log, flight.phases) if phase == 'closer']
+    keep_off_m = flight.mission._ctx.keep_off_m
+    # it came within confirm_range_m of the candidate, past the pillar
+    cfg = flight.config
+    assert np.linalg.norm((far.p_poi_map - closer[-1])[:2]) <= (
+        cfg.search.confirm_range_m + cfg.flight.arrive_tol_m)
+    assert min(pillar.distance_xy(p[:2]) for p in closer) >= keep_off_m * 0.99
+    flight.run_until(lambda f: f.mission.phase not in ('closer', 'confirm'), 60.0)
+    assert flight.mission.mode == Mode.SEARCH

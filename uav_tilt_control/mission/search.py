@@ -43,6 +43,7 @@ class Search(ModeBehaviour):
         # (point, yaw) to face a wall or a structure from, once planned
         self.face_points: list[tuple[np.ndarray, float]] | None = None
         self.legs: list[np.ndarray] = []    # the way to the point under way, corner by corner
+        self.closer_legs: list[np.ndarray] = []     # the same, closer to a candidate
         self.face_yaw = 0.0
         self.origin = np.zeros(3)           # where the search began
         self.resume_phase = SWEEP
@@ -217,7 +218,9 @@ class Search(ModeBehaviour):
         measurements."""
         ctx, cfg = self.ctx, self.ctx.config
         if self._phase == CLOSER:
-            if ctx.arrived():
+            if ctx.arrived() and self.closer_legs:
+                ctx.ref.plan(self.closer_legs.pop(0), cfg.flight.hover_speed_m_s)
+            elif ctx.arrived():
                 self._phase, self.since_s = CONFIRM, ctx.now_s
             return None
         if usable(target):
@@ -232,12 +235,14 @@ class Search(ModeBehaviour):
         distance = float(np.linalg.norm(away))
         if self.agreeing and not self.moved_closer and \
                 distance > cfg.search.confirm_range_m + cfg.flight.arrive_tol_m:
-            self._phase, self.moved_closer = CLOSER, True
             p = ctx.ref.in_map()[0]
-            ctx.ref.plan(p + away * (1.0 - cfg.search.confirm_range_m / distance),
-                         cfg.flight.hover_speed_m_s)
-            ctx.event('closer to the candidate')
-            return None
+            # round the site's obstacles (boxed in: the candidate is dropped)
+            path = ctx.route(p, p + away * (1.0 - cfg.search.confirm_range_m / distance))
+            if path is not None:
+                self._phase, self.moved_closer, self.closer_legs = CLOSER, True, path
+                ctx.ref.plan(self.closer_legs.pop(0), cfg.flight.hover_speed_m_s)
+                ctx.event('closer to the candidate')
+                return None
         if ctx.drop_target is not None:
             ctx.drop_target()
         self._phase, self.ignore_until_s = self.resume_phase, ctx.now_s + IGNORE_AFTER_DROP_S
