@@ -11,7 +11,7 @@ import pytest
 from uav_tilt_common.config import ConfigError, from_dict, read_yaml
 from uav_tilt_common.targets import HINT_ERROR_M
 from uav_tilt_control.mission import MissionConfig
-from uav_tilt_control.plan import Slide, parse_plan, path_distance_m
+from uav_tilt_control.plan import Slide, nearest_on_path, parse_plan
 from uav_tilt_control.site import CYLINDER_FIELDS, SiteConfig
 from uav_tilt_control.surfaces import PATH_STEP_M, CylinderSurface, path_on
 from uav_tilt_control.trajectory import SurfaceCruise
@@ -122,20 +122,26 @@ def test_a_slide_s_reference_rides_round_a_tank_on_its_surface():
 
 def test_a_tip_off_the_path_is_off_by_its_distance_along_the_surface():
     """A tip pressed into the surface (or lifted off it) along the normal is on the path;
-    one moved across it is off by that much."""
+    one moved across it is off by that much; the normal where either is, is the
+    surface's there (between the path's points as at them)."""
     rng = np.random.default_rng()
     radius = float(rng.uniform(0.15, 0.5))
     surface = CylinderSurface((0.0, 0.0, 2.0), float(rng.uniform(-180, 180)), 0.0, radius, 4.0)
     path = path_on(surface, [[-0.1, 0.0], [0.1, 0.0]])     # round the side, across the axis
-    k = len(path.points_map) // 2
-    p, n = path.points_map[k], path.normals_map[k]
+    uv = [float(rng.uniform(-0.1, 0.1)), 0.0]
+    p, n = surface.point_map(uv), surface.normal_map(uv)
     axis = surface.point_map([0.0, 1.0]) - surface.point_map([0.0, 0.0])
     depth, across = rng.uniform(-0.02, 0.02), rng.uniform(0.001, 0.05)
     tips = [p + n * depth, p + axis * across]
-    pressed, moved = path_distance_m(tips, path.points_map, path.normals_map)
-    # each leg's plane turns from the normal at its ends by half its angle
-    assert pressed <= abs(depth) * PATH_STEP_M / (2 * radius) + 1e-9
+    (pressed, moved), normals = nearest_on_path(tips, path.points_map, path.normals_map)
+    # each leg's plane turns from the normal along it by at most half its angle, and the
+    # surface sags off the chord by step^2 / 8 r
+    sag_m = PATH_STEP_M ** 2 / (8 * radius)
+    assert pressed <= (abs(depth) + sag_m) * PATH_STEP_M / (2 * radius) + 1e-9
     assert moved == pytest.approx(across, abs=1e-9)
+    for normal in normals:
+        assert np.degrees(np.arccos(min(normal @ n, 1.0))) <= np.degrees(
+            (PATH_STEP_M / radius) ** 2)
 
 
 def _cylinder_site(**cylinder):

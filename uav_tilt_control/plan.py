@@ -201,11 +201,14 @@ class LineProgress:
         return best_s
 
 
-def path_distance_m(tips: ArrayLike, points: ArrayLike, normals: ArrayLike) -> np.ndarray:
-    """Distance of each of ``tips`` (N, 3) from the path through ``points`` (M, 3) along the
-    surface whose outward normals there are ``normals`` (M, 3, or one for all): each leg's
-    in the plane across its mean normal, so that a tip pressed into a surface that gives
-    way, or lifted off it, is not off the path for it."""
+def nearest_on_path(tips: ArrayLike, points: ArrayLike, normals: ArrayLike
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(distance, outward normal there) of the path's point nearest each of ``tips`` (N, 3),
+    the path through ``points`` (M, 3) on the surface whose outward normals there are
+    ``normals`` (M, 3, or one for all). The distance is along the surface: each leg's in
+    the plane across its mean normal, so that a tip pressed into a surface that gives way,
+    or lifted off it, is not off the path for it. The normal is interpolated along the leg
+    (N, 3)."""
     tips = np.asarray(tips, dtype=float).reshape(-1, 1, 3)
     points = np.asarray(points, dtype=float)
     normals = np.broadcast_to(np.asarray(normals, dtype=float), points.shape)
@@ -216,7 +219,12 @@ def path_distance_m(tips: ArrayLike, points: ArrayLike, normals: ArrayLike) -> n
     rel = rel - np.sum(rel * n, axis=2, keepdims=True) * n
     d = d - np.sum(d * n, axis=1, keepdims=True) * n
     u = np.clip(np.sum(rel * d, axis=2) / np.sum(d * d, axis=1), 0.0, 1.0)
-    return np.linalg.norm(rel - u[:, :, None] * d, axis=2).min(axis=1)
+    distance = np.linalg.norm(rel - u[:, :, None] * d, axis=2)
+    leg = np.argmin(distance, axis=1)
+    w = u[np.arange(len(leg)), leg][:, None]
+    normal = normals[leg] + w * (normals[leg + 1] - normals[leg])
+    return (distance[np.arange(len(leg)), leg],
+            normal / np.linalg.norm(normal, axis=1, keepdims=True))
 
 
 def _listed(array: ArrayLike | None) -> list[Any] | None:

@@ -7,7 +7,7 @@ from uav_tilt_common.modes import Mode
 from uav_tilt_control.mission.base import (Context, Enter, Failsafe, FailTask, ModeBehaviour,
                                            NextTask, TaskDone, Transition)
 from uav_tilt_control.mission.reference import SetpointSample
-from uav_tilt_control.plan import LineProgress, Slide as SlideTask, Touch, path_distance_m
+from uav_tilt_control.plan import LineProgress, Slide as SlideTask, Touch, nearest_on_path
 from uav_tilt_control.target_estimator import TargetEstimate
 from uav_tilt_control.trajectory import MinJerk, SurfaceCruise
 
@@ -184,4 +184,4 @@ def distance_on_surface(p: np.ndarray, points: np.ndarray, normals: np.ndarray) 
     """Distance from ``p`` to the path through ``points`` (N, 3) along the surface whose
     outward normals there are ``normals``: the part along the normal (a tip pressed into a
     surface that gives way, or lifted off it) left out."""
-    return float(path_distance_m(np.asarray(p, dtype=float)[None, :], points, normals)[0])
+    return float(nearest_on_path(np.asarray(p, dtype=float)[None, :], points, normals)[0][0])

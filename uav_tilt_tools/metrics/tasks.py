@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from uav_tilt_common.modes import Mode
 from uav_tilt_control import frames
-from uav_tilt_control.plan import LineProgress, path_distance_m
+from uav_tilt_control.plan import LineProgress, nearest_on_path
 from uav_tilt_tools.metrics.mission import tool_normal_angles_deg
 
 # The inspection bar (DESIGN section 7): over the hold, the true tool tip within 1 cm of the
@@ -206,14 +206,12 @@ def slide_normals(task: dict[str, Any], wall_normal_map: npt.ArrayLike | None
 
 
 def normals_at(tips: npt.ArrayLike, task: dict[str, Any], normals: np.ndarray) -> np.ndarray:
-    """The normal of :func:`slide_normals` at each tool tip (N, 3): that of the path's point
-    nearest it."""
+    """The normal of :func:`slide_normals` at each tool tip (N, 3): at the path's point
+    nearest it, interpolated between the path's points."""
     tips = np.asarray(tips, dtype=float).reshape(-1, 3)
     if normals.ndim == 1:
         return np.broadcast_to(normals, tips.shape)
-    points = np.asarray(task['points_map'], dtype=float)
-    nearest = np.argmin(np.linalg.norm(tips[:, None, :] - points[None], axis=2), axis=1)
-    return normals[nearest]
+    return nearest_on_path(tips, task['points_map'], normals)[1]
 
 
 def slide_geometry(task: dict[str, Any], tips: npt.ArrayLike, normals: np.ndarray
@@ -229,7 +227,7 @@ def slide_geometry(task: dict[str, Any], tips: npt.ArrayLike, normals: np.ndarra
     R, origin = frames.target_frame_from_normal(points[0], first)
     uv0 = np.asarray(task.get('points_uv') or [[0.0, 0.0]], dtype=float)[0]
     tips = np.asarray(tips, dtype=float).reshape(-1, 3)
-    distance = path_distance_m(tips, points, normals) if len(tips) else np.zeros(0)
+    distance = nearest_on_path(tips, points, normals)[0] if len(tips) else np.zeros(0)
     progress = LineProgress(points)
     along = np.array([progress.update(tip) for tip in tips])
     uv = uv0 + ((tips - origin) @ R)[:, :2]
