@@ -83,10 +83,6 @@ class SiteConfig:
                                   f"more than 0, not {radius}, {length}")
         return self
 
-    def surface_ids(self) -> list[str]:
-        """What a task's ``on`` may name: '' (the wall, when surveyed) and the cylinders."""
-        return ([''] if self.wall_size_known else []) + list(self.cylinder_ids)
-
     def surface(self, on: str = '') -> Surface:
         """The surface a task's ``on`` names: '' the wall, else a cylinder's id (ValueError
         for an unknown one)."""

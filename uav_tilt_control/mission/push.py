@@ -81,6 +81,7 @@ class Slide(_Pushing):
         super().__init__(ctx)
         self._cruise: SurfaceCruise | None = None
         self._progress: LineProgress | None = None
+        self._depth_m = 0.0
         self._v_map = self._a_map = np.zeros(3)
 
     def enter(self, previous: Mode, target: TargetEstimate | None) -> None:
@@ -90,17 +91,18 @@ class Slide(_Pushing):
         self._cruise = SurfaceCruise(ctx.now_s, task.path, task.speed_m_s,
                                      ctx.config.slide.accel_m_s2)
         self._progress = LineProgress(task.points_map)
-        # in the frame that rides along the path the reference stays at the press depth
-        depth = np.array([0.0, 0.0, ctx.ref.segment.p1[2]])
+        # in the frame that rides along the path the body's reference stays at the press
+        # depth, out along the normal (frame z)
+        self._depth_m = float(ctx.ref.segment.p1[2])
+        depth = np.array([0.0, 0.0, self._depth_m])
         ctx.ref.follow(MinJerk(ctx.now_s, depth, depth, 1.0))
         self.steer(0.0)
         ctx.event('sliding')
 
     def steer(self, dt_s: float) -> None:
         assert self._cruise is not None
-        # the body's reference stays its depth out along the normal (frame z)
-        depth_m = float(self.ctx.ref.segment.p1[2])
-        point, normal, self._v_map, self._a_map = self._cruise.sample(self.ctx.now_s, depth_m)
+        point, normal, self._v_map, self._a_map = self._cruise.sample(self.ctx.now_s,
+                                                                      self._depth_m)
         self.ctx.ref.set_target_frame(TargetEstimate(point, normal, 0.0, True))
 
     def shape(self, sample: SetpointSample) -> None:
@@ -117,7 +119,7 @@ class Slide(_Pushing):
         assert cruise is not None and line is not None and isinstance(task, SlideTask)
         self.regulate(f_n)
         # the tool tip as odometry sees it, against the path on the surface
-        tip_map = ctx.ref.frame.p + ctx.ref.frame.R @ ctx.ref.tool_tip_t(ctx.vehicle_state)
+        tip_map = ctx.ref.tool_tip_map(ctx.vehicle_state)
         tolerance_m = ctx.config.slide.path_tolerance_m
         along_m = line.update(tip_map)
         # how far the tool tip is behind its reference along the line (at the line's end

@@ -121,11 +121,14 @@ class Reference:
         """A map point in the working frame."""
         return frames.to_frame(self.frame.R, self.frame.p, p_map)
 
-    def tool_tip_t(self, state: VehicleState) -> np.ndarray:
-        """The tool tip in the working frame, as odometry (position and attitude) sees it."""
+    def tool_tip_map(self, state: VehicleState) -> np.ndarray:
+        """The tool tip in map, as odometry (position and attitude) sees it."""
         x_tool_map = frames.quat_matrix(state.q_map_base)[:, 0]
-        return self.to_frame(state.p_map) + self.frame.R.T @ x_tool_map * (
-            self.vehicle.tool_tip_x_m)
+        return np.asarray(state.p_map, dtype=float) + x_tool_map * self.vehicle.tool_tip_x_m
+
+    def tool_tip_t(self, state: VehicleState) -> np.ndarray:
+        """The tool tip in the working frame, as odometry sees it."""
+        return self.to_frame(self.tool_tip_map(state))
 
     def standoff_t(self) -> np.ndarray:
         """The body's place at the standoff, in frame t."""
