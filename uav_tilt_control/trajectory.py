@@ -11,6 +11,7 @@ for another and lambda_d, dlambda_d and ddlambda_d stay consistent:
   the tool tip sliding along a plane, and :class:`SurfaceCruise`, the same along a path on
   any surface, with the surface's normal where the reference is.
 """
+import bisect
 from typing import cast
 
 import numpy as np
@@ -248,6 +249,7 @@ class SurfaceCruise:
         self._normals = np.asarray(path.normals_map, dtype=float)
         legs = np.linalg.norm(np.diff(self._points, axis=0), axis=1)
         self._s = np.concatenate(([0.0], np.cumsum(legs)))
+        self._s_list = self._s.tolist()     # looked up every control tick
         # the step of the derivatives: a leg, so that they span the legs round a point
         self._h = float(legs.mean())
         self._cruise = PolylineCruise(t0_s, self._s[path.vertices][:, None], speed, accel)
@@ -263,9 +265,10 @@ class SurfaceCruise:
 
     def at(self, s: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(point, unit normal) ``s`` metres along the path (clamped to it)."""
-        s = min(max(s, 0.0), float(self._s[-1]))
-        k = int(np.clip(np.searchsorted(self._s, s, side='right') - 1, 0, len(self._s) - 2))
-        w = (s - self._s[k]) / (self._s[k + 1] - self._s[k])
+        starts = self._s_list
+        s = min(max(s, 0.0), starts[-1])
+        k = min(max(bisect.bisect_right(starts, s) - 1, 0), len(starts) - 2)
+        w = (s - starts[k]) / (starts[k + 1] - starts[k])
         normal = self._normals[k] + w * (self._normals[k + 1] - self._normals[k])
         return (self._points[k] + w * (self._points[k + 1] - self._points[k]),
                 normal / np.linalg.norm(normal))
